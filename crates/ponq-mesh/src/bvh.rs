@@ -1,0 +1,1 @@
+//! Axis-aligned bounding-box hierarchy over triangles.

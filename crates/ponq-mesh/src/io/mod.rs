@@ -1,0 +1,1 @@
+//! File formats: PoNQ `.npz` files and triangle meshes (OBJ, PLY, OFF, STL).

@@ -1,0 +1,34 @@
+//! # ponq-mesh
+//!
+//! Turns a PoNQ (points, normals, quadric error metrics) into a watertight, manifold,
+//! self-intersection-free triangle mesh, following PoNQ (CVPR 2024), and holds the
+//! geometry the rest of PoNQ-rs shares (mesh I/O, validity checks).
+//!
+//! The pipeline, one module per stage:
+//! [`quadric`] (v* from Q) -> [`delaunay`] (exact 3D Delaunay of v* + protective corners) ->
+//! [`tagging`] (inside / outside / unknown tets) -> [`score`] (face scores) ->
+//! [`maxflow`] + [`cut`] (minimum s-t cut) -> [`extract`] (oriented boundary) ->
+//! [`manifold`] (relabel tets until the boundary is a strict manifold).
+//! [`mesher`] runs them all.
+//!
+//! ```no_run
+//! use ponq_mesh::{io, mesher::{mesh_ponq, MeshingOptions}};
+//! let ponq = io::npz::read_ponq("shape.npz")?;
+//! let out = mesh_ponq(&ponq, &MeshingOptions { grid_scale: 32.0, ..Default::default() })?;
+//! io::write_mesh("shape.obj", &out.mesh)?;
+//! # Ok::<(), ponq_mesh::Error>(())
+//! ```
+
+pub mod bvh;
+pub mod error;
+pub mod io;
+pub mod maxflow;
+pub mod ponq;
+pub mod quadric;
+pub mod trimesh;
+pub mod validity;
+
+pub use error::{Error, Result};
+pub use ponq::Ponq;
+pub use quadric::Quadric;
+pub use trimesh::TriMesh;

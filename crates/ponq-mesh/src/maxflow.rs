@@ -1,0 +1,1 @@
+//! Maximum flow / minimum s-t cut (Boykov-Kolmogorov).

@@ -1,0 +1,1 @@
+//! Mesh validity: closed, oriented, manifold, free of self-intersections (exact).

@@ -20,10 +20,12 @@
 //! ```
 
 pub mod bvh;
+pub mod delaunay;
 pub mod error;
 pub mod io;
 pub mod maxflow;
 pub mod ponq;
+pub mod predicates;
 pub mod quadric;
 pub mod trimesh;
 pub mod validity;

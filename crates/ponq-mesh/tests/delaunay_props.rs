@@ -1,0 +1,201 @@
+//! Properties of the exact Delaunay tetrahedralisation on random, degenerate and lattice inputs.
+
+use ponq_mesh::delaunay::{Delaunay, NONE};
+use ponq_mesh::predicates::{insphere, orient3d};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn vol6(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> f64 {
+    let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let w = [d[0] - a[0], d[1] - a[1], d[2] - a[2]];
+    u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
+        + u[2] * (v[0] * w[1] - v[1] * w[0])
+}
+
+/// Structural checks; returns the total volume.
+fn check_structure(dt: &Delaunay) -> f64 {
+    let p = |v: u32| &dt.vertices[v as usize];
+    let mut vol = 0.0;
+    for (t, tv) in dt.tets.iter().enumerate() {
+        assert_eq!(
+            orient3d(p(tv[0]), p(tv[1]), p(tv[2]), p(tv[3])),
+            1,
+            "tet {t} not positively oriented"
+        );
+        vol += vol6(p(tv[0]), p(tv[1]), p(tv[2]), p(tv[3])) / 6.0;
+        for k in 0..4 {
+            let nb = dt.neighbors[t][k];
+            if nb == NONE {
+                continue;
+            }
+            let back = dt.neighbors[nb as usize]
+                .iter()
+                .position(|&x| x as usize == t)
+                .expect("neighbour relation is symmetric");
+            let mut f1: Vec<u32> = (0..4).filter(|&j| j != k).map(|j| tv[j]).collect();
+            let nv = dt.tets[nb as usize];
+            let mut f2: Vec<u32> = (0..4).filter(|&j| j != back).map(|j| nv[j]).collect();
+            f1.sort();
+            f2.sort();
+            assert_eq!(f1, f2, "neighbours {t} and {nb} do not share the face");
+            assert_ne!(tv[k], nv[back], "the apexes of a face must differ");
+        }
+    }
+    vol
+}
+
+/// No vertex strictly inside any circumsphere (brute force).
+fn check_empty_spheres(dt: &Delaunay) {
+    let p = |v: u32| &dt.vertices[v as usize];
+    for tv in &dt.tets {
+        for (i, q) in dt.vertices.iter().enumerate() {
+            if tv.contains(&(i as u32)) {
+                continue;
+            }
+            assert!(
+                insphere(p(tv[0]), p(tv[1]), p(tv[2]), p(tv[3]), q) <= 0,
+                "vertex {i} inside the circumsphere of {tv:?}"
+            );
+        }
+    }
+}
+
+fn hull_box_volume(pts: &[[f64; 3]]) -> f64 {
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for p in pts {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2])
+}
+
+fn cube_corners() -> Vec<[f64; 3]> {
+    let mut v = Vec::new();
+    for i in 0..8 {
+        v.push([
+            if i & 1 == 0 { -1.0 } else { 1.0 },
+            if i & 2 == 0 { -1.0 } else { 1.0 },
+            if i & 4 == 0 { -1.0 } else { 1.0 },
+        ]);
+    }
+    v
+}
+
+#[test]
+fn random_points_in_a_box_fill_the_box() {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for n in [0usize, 1, 5, 50, 400] {
+        let mut pts = cube_corners();
+        for _ in 0..n {
+            pts.push([
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ]);
+        }
+        let dt = Delaunay::new(&pts).unwrap();
+        let vol = check_structure(&dt);
+        assert!((vol - 8.0).abs() < 1e-9, "n={n}: volume {vol}");
+        check_empty_spheres(&dt);
+    }
+}
+
+#[test]
+fn lattice_is_triangulated_without_flat_tets() {
+    // 6^3 lattice: every cell's 8 corners are co-spherical.
+    let mut pts = Vec::new();
+    for i in 0..6 {
+        for j in 0..6 {
+            for k in 0..6 {
+                pts.push([i as f64 * 0.2, j as f64 * 0.2, k as f64 * 0.2]);
+            }
+        }
+    }
+    let dt = Delaunay::new(&pts).unwrap();
+    let vol = check_structure(&dt);
+    assert!((vol - hull_box_volume(&pts)).abs() < 1e-9, "volume {vol}");
+    check_empty_spheres(&dt);
+    // Every vertex is used.
+    let mut used = vec![false; dt.vertices.len()];
+    for t in &dt.tets {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    assert!(used.iter().all(|&u| u));
+}
+
+#[test]
+fn duplicates_are_merged() {
+    let mut pts = cube_corners();
+    pts.push([0.1, 0.2, 0.3]);
+    pts.push([0.1, 0.2, 0.3]);
+    pts.push([-1.0, -1.0, -1.0]);
+    let dt = Delaunay::new(&pts).unwrap();
+    assert_eq!(dt.vertices.len(), 9);
+    assert_eq!(dt.vertex_of_point[9], dt.vertex_of_point[8]);
+    assert_eq!(dt.vertex_of_point[10], dt.vertex_of_point[0]);
+    let vol = check_structure(&dt);
+    assert!((vol - 8.0).abs() < 1e-9);
+}
+
+#[test]
+fn degenerate_inputs_give_no_tets() {
+    // Coplanar points, collinear points, fewer than 4 points.
+    let coplanar: Vec<[f64; 3]> = (0..30)
+        .map(|i| [(i % 6) as f64, (i / 6) as f64, 2.0])
+        .collect();
+    for pts in [
+        coplanar,
+        (0..10).map(|i| [i as f64, 2.0 * i as f64, 0.5]).collect(),
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        vec![],
+    ] {
+        let dt = Delaunay::new(&pts).unwrap();
+        assert!(dt.tets.is_empty());
+    }
+    assert!(Delaunay::new(&[[f64::NAN, 0.0, 0.0]]).is_err());
+}
+
+#[test]
+fn cospherical_points_on_a_sphere() {
+    // Points exactly on the unit sphere along axes and diagonals of a cube (co-spherical).
+    let s = 1.0 / 3f64.sqrt();
+    let mut pts = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    for c in cube_corners() {
+        pts.push([c[0] * s, c[1] * s, c[2] * s]);
+    }
+    pts.push([0.0, 0.0, 0.0]);
+    let dt = Delaunay::new(&pts).unwrap();
+    check_structure(&dt);
+    check_empty_spheres(&dt);
+}
+
+#[test]
+fn larger_random_set_structure() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut pts = cube_corners();
+    // Points on a sphere and a grid-snapped cloud: many exact ties.
+    for _ in 0..3000 {
+        let p: [f64; 3] = [
+            (rng.random_range(-8i32..=8) as f64) / 8.0,
+            (rng.random_range(-8i32..=8) as f64) / 8.0,
+            (rng.random_range(-8i32..=8) as f64) / 8.0,
+        ];
+        pts.push(p);
+    }
+    let dt = Delaunay::new(&pts).unwrap();
+    let vol = check_structure(&dt);
+    assert!((vol - 8.0).abs() < 1e-9, "volume {vol}");
+}

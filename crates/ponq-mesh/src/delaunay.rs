@@ -192,23 +192,36 @@ impl Delaunay {
     }
 }
 
+/// A tet of the builder: vertices, neighbours and the insertion stamp, kept together so that
+/// the cavity search touches one cache line per tet.
+#[derive(Clone, Copy)]
+struct Tet {
+    v: [u32; 4],
+    n: [u32; 4],
+    /// Insertion stamp; [`DEAD`] for a free slot.
+    mark: u32,
+}
+
+const DEAD: u32 = u32::MAX;
+
 struct Builder {
     /// Real vertices followed by the 4 super-tetrahedron vertices.
     pos: Vec<[f64; 3]>,
     n_real: u32,
-    tets: Vec<[u32; 4]>,
-    nbrs: Vec<[u32; 4]>,
-    alive: Vec<bool>,
-    mark: Vec<u32>,
+    tets: Vec<Tet>,
     free: Vec<u32>,
     rng: SplitMix,
     // Per-insertion scratch.
     stack: Vec<u32>,
     cavity: Vec<u32>,
     boundary: Vec<(u32, u8, u32, u8)>,
-    new_tets: Vec<u32>,
-    edges: Vec<(u64, u32, u8)>,
+    new_tets: Vec<([u32; 4], u32, u8)>,
+    /// Open-addressing table edge key -> (tet, face) for linking the new tets.
+    table: Vec<(u64, u32, u8)>,
+    used: Vec<usize>,
 }
+
+const EMPTY_KEY: u64 = u64::MAX;
 
 impl Builder {
     fn new(mut pos: Vec<[f64; 3]>) -> Self {
@@ -249,25 +262,24 @@ impl Builder {
         {
             tet.swap(0, 1);
         }
-        let cap = 7 * pos.len() + 16;
-        let mut tets = Vec::with_capacity(cap);
-        let mut nbrs = Vec::with_capacity(cap);
-        tets.push(tet);
-        nbrs.push([NONE; 4]);
+        let mut tets = Vec::with_capacity(7 * pos.len() + 16);
+        tets.push(Tet {
+            v: tet,
+            n: [NONE; 4],
+            mark: 0,
+        });
         Self {
             pos,
             n_real,
             tets,
-            nbrs,
-            alive: vec![true],
-            mark: vec![0],
             free: Vec::new(),
             rng: SplitMix(12345),
             stack: Vec::new(),
             cavity: Vec::new(),
             boundary: Vec::new(),
             new_tets: Vec::new(),
-            edges: Vec::new(),
+            table: vec![(EMPTY_KEY, 0, 0); 256],
+            used: Vec::new(),
         }
     }
 
@@ -298,6 +310,13 @@ impl Builder {
         self.finish()
     }
 
+    #[inline]
+    fn face_sees(&self, tv: [u32; 4], k: usize, p: &[f64; 3]) -> i32 {
+        let mut q = [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])];
+        q[k] = p;
+        orient3d(q[0], q[1], q[2], q[3])
+    }
+
     /// Stochastic visibility walk from `start` to a tet containing point `v`.
     fn locate(&mut self, start: u32, v: u32) -> u32 {
         let p = self.pos[v as usize];
@@ -305,23 +324,16 @@ impl Builder {
         let mut prev = NONE;
         let max_steps = 64 + 4 * self.tets.len();
         for _ in 0..max_steps {
-            let tv = self.tets[t as usize];
+            let tet = self.tets[t as usize];
             let r = (self.rng.next() & 3) as usize;
             let mut moved = false;
             for j in 0..4 {
                 let k = (r + j) & 3;
-                let nb = self.nbrs[t as usize][k];
+                let nb = tet.n[k];
                 if nb == NONE || nb == prev {
                     continue;
                 }
-                let mut q = [
-                    self.p(tv[0]),
-                    self.p(tv[1]),
-                    self.p(tv[2]),
-                    self.p(tv[3]),
-                ];
-                q[k] = &p;
-                if orient3d(q[0], q[1], q[2], q[3]) < 0 {
+                if self.face_sees(tet.v, k, &p) < 0 {
                     prev = t;
                     t = nb;
                     moved = true;
@@ -329,33 +341,21 @@ impl Builder {
                 }
             }
             if !moved {
-                // `prev` was skipped: p cannot be behind the face we came through (we crossed
-                // it because p is in front of it), so t contains p.
+                // `prev` was skipped: p is strictly in front of the face we came through.
                 return t;
             }
         }
         // Safety net (never expected): scan for a containing tet.
         (0..self.tets.len() as u32)
             .find(|&t| {
-                self.alive[t as usize] && {
-                    let tv = self.tets[t as usize];
-                    (0..4).all(|k| {
-                        let mut q = [
-                            self.p(tv[0]),
-                            self.p(tv[1]),
-                            self.p(tv[2]),
-                            self.p(tv[3]),
-                        ];
-                        q[k] = &p;
-                        orient3d(q[0], q[1], q[2], q[3]) >= 0
-                    })
-                }
+                let tet = self.tets[t as usize];
+                tet.mark != DEAD && (0..4).all(|k| self.face_sees(tet.v, k, &p) >= 0)
             })
             .unwrap_or(t)
     }
 
-    fn conflicts(&self, t: u32, v: u32) -> bool {
-        let tv = self.tets[t as usize];
+    #[inline]
+    fn conflicts(&self, tv: [u32; 4], v: u32) -> bool {
         in_conflict(
             [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])],
             tv,
@@ -372,75 +372,79 @@ impl Builder {
         self.boundary.clear();
         self.stack.clear();
         self.stack.push(t);
-        self.mark[t as usize] = in_cav;
+        self.tets[t as usize].mark = in_cav;
         while let Some(c) = self.stack.pop() {
             self.cavity.push(c);
+            let cn = self.tets[c as usize].n;
             for k in 0..4u8 {
-                let nb = self.nbrs[c as usize][k as usize];
+                let nb = cn[k as usize];
                 if nb == NONE {
                     self.boundary.push((c, k, NONE, 0));
                     continue;
                 }
-                let m = self.mark[nb as usize];
-                if m == in_cav {
+                let nt = self.tets[nb as usize];
+                if nt.mark == in_cav {
                     continue;
                 }
-                if m != not_cav && self.conflicts(nb, v) {
-                    self.mark[nb as usize] = in_cav;
+                if nt.mark != not_cav && self.conflicts(nt.v, v) {
+                    self.tets[nb as usize].mark = in_cav;
                     self.stack.push(nb);
                 } else {
-                    self.mark[nb as usize] = not_cav;
-                    let j = self.nbrs[nb as usize]
-                        .iter()
-                        .position(|&x| x == c)
-                        .expect("adjacency is symmetric") as u8;
+                    self.tets[nb as usize].mark = not_cav;
+                    let j = nt.n.iter().position(|&x| x == c).expect("adjacency is symmetric") as u8;
                     self.boundary.push((c, k, nb, j));
                 }
             }
         }
-        // New tets: one per boundary face, the cavity tet's vertex k replaced by v.
+        // New tets: one per boundary face, the cavity tet's vertex k replaced by v. Read the
+        // cavity tets' vertices before their slots are reused.
         self.new_tets.clear();
+        for &(c, k, _, _) in &self.boundary {
+            let mut tv = self.tets[c as usize].v;
+            tv[k as usize] = v;
+            self.new_tets.push((tv, 0, k));
+        }
         let mut reuse = 0usize;
-        for i in 0..self.boundary.len() {
+        for i in 0..self.new_tets.len() {
             let id = if reuse < self.cavity.len() {
                 reuse += 1;
                 self.cavity[reuse - 1]
             } else if let Some(f) = self.free.pop() {
                 f
             } else {
-                self.tets.push([0; 4]);
-                self.nbrs.push([NONE; 4]);
-                self.alive.push(true);
-                self.mark.push(0);
+                self.tets.push(Tet {
+                    v: [0; 4],
+                    n: [NONE; 4],
+                    mark: 0,
+                });
                 (self.tets.len() - 1) as u32
             };
-            let _ = i;
-            self.new_tets.push(id);
+            self.new_tets[i].1 = id;
         }
-        for &c in &self.cavity[reuse..] {
-            self.alive[c as usize] = false;
+        for i in reuse..self.cavity.len() {
+            let c = self.cavity[i];
+            self.tets[c as usize].mark = DEAD;
             self.free.push(c);
         }
-        // Read the cavity tets' vertices before overwriting them.
-        let new_vertices: Vec<([u32; 4], u8, u32, u8)> = self
-            .boundary
-            .iter()
-            .map(|&(c, k, nb, j)| {
-                let mut tv = self.tets[c as usize];
-                tv[k as usize] = v;
-                (tv, k, nb, j)
-            })
-            .collect();
-        self.edges.clear();
-        for (i, &(tv, k, nb, j)) in new_vertices.iter().enumerate() {
-            let id = self.new_tets[i];
-            self.tets[id as usize] = tv;
-            self.alive[id as usize] = true;
-            self.mark[id as usize] = 0;
-            self.nbrs[id as usize] = [NONE; 4];
-            self.nbrs[id as usize][k as usize] = nb;
+        // Size the edge table (3 entries per new tet, load <= 1/2).
+        let need = (6 * self.new_tets.len()).next_power_of_two().max(256);
+        if self.table.len() < need {
+            self.table = vec![(EMPTY_KEY, 0, 0); need];
+        }
+        let mask = self.table.len() - 1;
+        let mut used_slots = std::mem::take(&mut self.used);
+        used_slots.clear();
+        for i in 0..self.new_tets.len() {
+            let (tv, id, k) = self.new_tets[i];
+            let (_, _, nb, j) = self.boundary[i];
+            self.tets[id as usize] = Tet {
+                v: tv,
+                n: [NONE; 4],
+                mark: 0,
+            };
+            self.tets[id as usize].n[k as usize] = nb;
             if nb != NONE {
-                self.nbrs[nb as usize][j as usize] = id;
+                self.tets[nb as usize].n[j as usize] = id;
             }
             debug_assert!(
                 orient3d(self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])) > 0,
@@ -450,7 +454,7 @@ impl Builder {
                 if f == k {
                     continue;
                 }
-                // Face opposite f contains v and the two vertices other than f and k.
+                // The face opposite f contains v and the two vertices other than f and k.
                 let mut e = [0u32; 2];
                 let mut n = 0;
                 for (s, &x) in tv.iter().enumerate() {
@@ -460,34 +464,45 @@ impl Builder {
                     }
                 }
                 let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
-                self.edges.push((key, id, f));
+                let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
+                loop {
+                    let slot = self.table[h];
+                    if slot.0 == EMPTY_KEY {
+                        self.table[h] = (key, id, f);
+                        used_slots.push(h);
+                        break;
+                    }
+                    if slot.0 == key {
+                        let (_, a, fa) = slot;
+                        self.tets[a as usize].n[fa as usize] = id;
+                        self.tets[id as usize].n[f as usize] = a;
+                        break;
+                    }
+                    h = (h + 1) & mask;
+                }
             }
         }
-        self.edges.sort_unstable_by_key(|e| e.0);
-        for pair in self.edges.chunks_exact(2) {
-            debug_assert_eq!(pair[0].0, pair[1].0, "cavity boundary is not a closed surface");
-            let (_, a, fa) = pair[0];
-            let (_, b, fb) = pair[1];
-            self.nbrs[a as usize][fa as usize] = b;
-            self.nbrs[b as usize][fb as usize] = a;
+        for &h in &used_slots {
+            self.table[h].0 = EMPTY_KEY;
         }
-        self.new_tets[0]
+        self.used = used_slots;
+        self.new_tets[0].1
     }
 
     fn finish(self) -> Delaunay {
         let n = self.n_real;
         let mut remap = vec![NONE; self.tets.len()];
         let mut tets = Vec::new();
-        for (t, tv) in self.tets.iter().enumerate() {
-            if self.alive[t] && tv.iter().all(|&v| v < n) {
+        for (t, tet) in self.tets.iter().enumerate() {
+            if tet.mark != DEAD && tet.v.iter().all(|&v| v < n) {
                 remap[t] = tets.len() as u32;
-                tets.push(*tv);
+                tets.push(tet.v);
             }
         }
         let mut neighbors = Vec::with_capacity(tets.len());
-        for (t, nb) in self.nbrs.iter().enumerate() {
+        for (t, tet) in self.tets.iter().enumerate() {
             if remap[t] != NONE {
-                neighbors.push(nb.map(|x| if x == NONE { NONE } else { remap[x as usize] }));
+                neighbors.push(tet.n.map(|x| if x == NONE { NONE } else { remap[x as usize] }));
             }
         }
         let mut vertices = self.pos;

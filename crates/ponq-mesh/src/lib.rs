@@ -19,14 +19,24 @@
 //! # Ok::<(), ponq_mesh::Error>(())
 //! ```
 
+
 pub mod bvh;
+pub mod complex;
+pub mod cut;
 pub mod delaunay;
 pub mod error;
+pub mod extract;
 pub mod io;
+pub mod lite;
+pub mod manifold;
 pub mod maxflow;
+pub mod mesher;
+pub mod open_surface;
 pub mod ponq;
 pub mod predicates;
 pub mod quadric;
+pub mod score;
+pub mod tagging;
 pub mod trimesh;
 pub mod validity;
 

@@ -94,3 +94,60 @@ impl Ponq {
         }
     }
 }
+
+impl Ponq {
+    /// Builds a PoNQ from oriented surface samples grouped into clusters (e.g. the Voronoi cells
+    /// of fitted points, or grid cells): per non-empty cluster, the mean sample position, the
+    /// mean normal and the mean of the samples' plane quadrics (SPEC section 7). Empty clusters
+    /// are dropped. `cluster[i] < n_clusters` is the cluster of sample `i`. Returns the PoNQ and,
+    /// for each of its points, its cluster index.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for mismatched lengths, an out-of-range cluster or NaN.
+    pub fn from_clusters(
+        samples: &[[f64; 3]],
+        normals: &[[f64; 3]],
+        cluster: &[u32],
+        n_clusters: usize,
+    ) -> Result<(Self, Vec<u32>)> {
+        if samples.len() != normals.len() || samples.len() != cluster.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} samples, {} normals, {} cluster ids",
+                samples.len(),
+                normals.len(),
+                cluster.len()
+            )));
+        }
+        let mut count = vec![0u32; n_clusters];
+        let mut pos = vec![[0.0f64; 3]; n_clusters];
+        let mut nor = vec![[0.0f64; 3]; n_clusters];
+        let mut quad = vec![Quadric::zero(); n_clusters];
+        for i in 0..samples.len() {
+            let c = cluster[i] as usize;
+            if c >= n_clusters {
+                return Err(Error::InvalidInput(format!(
+                    "sample {i} is in cluster {c} >= {n_clusters}"
+                )));
+            }
+            count[c] += 1;
+            for k in 0..3 {
+                pos[c][k] += samples[i][k];
+                nor[c][k] += normals[i][k];
+            }
+            quad[c] += Quadric::from_plane(samples[i], normals[i]);
+        }
+        let mut ids = Vec::new();
+        let (mut p, mut n, mut q) = (Vec::new(), Vec::new(), Vec::new());
+        for c in 0..n_clusters {
+            if count[c] == 0 {
+                continue;
+            }
+            let w = 1.0 / f64::from(count[c]);
+            ids.push(c as u32);
+            p.push(pos[c].map(|x| x * w));
+            n.push(nor[c].map(|x| x * w));
+            q.push(quad[c] * w);
+        }
+        Ok((Ponq::new(p, n, q, None)?, ids))
+    }
+}

@@ -1,1 +1,170 @@
-fn main() {}
+//! `ponq-mesh`: mesh a stored PoNQ file (`.npz`) into a watertight manifold triangle mesh.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use ponq_mesh::io;
+use ponq_mesh::lite::{cell_of, coarsen};
+use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::open_surface::DEFAULT_OPEN_THRESHOLD;
+use ponq_mesh::validity;
+
+/// Mesh a PoNQ file (points, normals, quadrics) into a closed, oriented, manifold,
+/// self-intersection-free triangle mesh.
+///
+/// The input is an `.npz` with arrays `points` (M,3), `normals` (M,3), `quadrics` (M,4,4)
+/// (float32 or float64) and optionally `vstars` (M,3), in the frame of the grid domain
+/// (the [-1,1]^3 box unless --bounds says otherwise).
+#[derive(Parser, Debug)]
+#[command(version, about, long_about)]
+struct Args {
+    /// Input PoNQ file (.npz).
+    input: PathBuf,
+    /// Output mesh (.obj or .ply).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Resolution N of the grid the PoNQ was made on (N cells per side): sets the face-score
+    /// weight h = N^2, the small-tet threshold and the cells of --lite.
+    #[arg(long, default_value_t = 32.0)]
+    grid_scale: f64,
+    /// PoNQ-lite: merge the points of each grid cell into one (quadrics summed). Cells are
+    /// found from the point positions.
+    #[arg(long)]
+    lite: bool,
+    /// Hierarchy: with --lite, merge 2x2x2 blocks of cells K more times (grid N / 2^K).
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    coarsen: u32,
+    /// Open surface: drop the triangles whose three vertices all have quadric anisotropy
+    /// (lambda2/lambda1) above T. Without a value T = 0.35.
+    #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
+    open: Option<f64>,
+    /// Domain box xmin,ymin,zmin,xmax,ymax,zmax (default -1,-1,-1,1,1,1).
+    #[arg(long, value_delimiter = ',', num_args = 6, allow_hyphen_values = true)]
+    bounds: Option<Vec<f64>>,
+    /// Skip the manifold repair (output is still closed and free of self-intersections,
+    /// but may have non-manifold edges or vertices, as the authors' mesher).
+    #[arg(long)]
+    no_manifold: bool,
+    /// Skip the exact validity check of the output (it is cheap; on by default).
+    #[arg(long)]
+    no_check: bool,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn run(args: &Args) -> Result<bool> {
+    let _ = DEFAULT_OPEN_THRESHOLD;
+    if let Some(t) = args.open
+        && !(0.0..=1.0).contains(&t)
+    {
+        bail!("--open threshold must be in [0, 1], got {t}");
+    }
+    if args.coarsen > 0 && !args.lite {
+        bail!("--coarsen needs --lite");
+    }
+    let domain = match &args.bounds {
+        None => ([-1.0; 3], [1.0; 3]),
+        Some(b) => {
+            let d = ([b[0], b[1], b[2]], [b[3], b[4], b[5]]);
+            if (0..3).any(|k| !(d.1[k] > d.0[k])) {
+                bail!("--bounds: each max must be larger than its min, got {b:?}");
+            }
+            d
+        }
+    };
+    let t0 = Instant::now();
+    let mut ponq = io::npz::read_ponq(&args.input)
+        .with_context(|| format!("reading the PoNQ file {}", args.input.display()))?;
+    let read_time = t0.elapsed();
+    let mut grid_scale = args.grid_scale;
+    if !(grid_scale >= 1.0 && grid_scale.is_finite()) {
+        bail!("--grid-scale must be >= 1, got {grid_scale}");
+    }
+    if args.lite {
+        let n = grid_scale.round() as usize;
+        let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
+        ponq = coarsen(&ponq, &cells, args.coarsen)?;
+        grid_scale /= f64::from(1u32 << args.coarsen.min(20));
+    }
+    let opts = MeshingOptions {
+        grid_scale,
+        domain,
+        manifold: !args.no_manifold,
+        open_threshold: args.open,
+        ..Default::default()
+    };
+    let out = mesh_ponq(&ponq, &opts)?;
+    let t1 = Instant::now();
+    io::write_mesh(&args.output, &out.mesh)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    let write_time = t1.elapsed();
+    let report = (!args.no_check).then(|| {
+        let t = Instant::now();
+        (validity::check(&out.mesh), t.elapsed())
+    });
+    if !args.quiet {
+        let s = &out.stats;
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        println!(
+            "{}: {} points -> {} V, {} F",
+            args.output.display(),
+            s.points,
+            out.mesh.vertices.len(),
+            out.mesh.faces.len()
+        );
+        if let Some(msg) = &out.message {
+            println!("note: {msg}");
+        }
+        println!(
+            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets",
+            s.tets, s.tagged[0], s.tagged[1], s.tagged[2], s.cut.nodes, s.cut.edges,
+            s.manifold.flipped_tets
+        );
+        println!(
+            "time (ms): read {:.1}, prepare {:.1}, delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, write {:.1}; meshing total {:.1}",
+            ms(read_time),
+            ms(s.times.prepare),
+            ms(s.times.delaunay),
+            ms(s.times.tagging),
+            ms(s.times.cut),
+            ms(s.times.manifold),
+            ms(s.times.extraction),
+            ms(write_time),
+            ms(s.times.total())
+        );
+        if let Some((r, d)) = &report {
+            println!("validity: {r} (checked in {:.1} ms)", ms(*d));
+        }
+    }
+    let ok = match &report {
+        None => true,
+        Some((r, _)) => {
+            if args.open.is_some() {
+                // Open meshes have boundary edges by design.
+                r.self_intersections == 0 && r.nonmanifold_edges == 0
+            } else {
+                r.is_valid()
+            }
+        }
+    };
+    Ok(ok)
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    match run(&args) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => {
+            eprintln!("error: the output mesh failed the validity check (see above)");
+            ExitCode::from(3)
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

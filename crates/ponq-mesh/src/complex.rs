@@ -1,0 +1,165 @@
+//! The tetrahedral complex the mesher works on: the Delaunay tetrahedralisation of the v*
+//! plus the eight protective corners, with the PoNQ data (unit normal, normalised quadric)
+//! attached to each vertex, and the inside / outside labels of the tets.
+
+use crate::delaunay::{Delaunay, NONE};
+use crate::predicates::orient3d;
+use crate::quadric::Quadric;
+
+/// Label of a tetrahedron.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Label {
+    /// Not decided yet (decided by the minimum cut).
+    Unknown,
+    /// Inside the shape.
+    Inside,
+    /// Outside the shape.
+    Outside,
+}
+
+/// The outward faces of a positively oriented tet: `FACES[k]` is the face opposite vertex `k`,
+/// ordered so that its right-hand normal points out of the tet.
+pub const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+
+/// Delaunay tets with per-vertex PoNQ data.
+///
+/// Invariants: `normals`, `quadrics`, `protective` have one entry per Delaunay vertex;
+/// normals are unit length or zero; quadrics are normalised (largest eigenvalue of `A` is 1,
+/// or `A = 0`); `incident` lists, for every vertex, the tets that contain it.
+#[derive(Debug, Clone)]
+pub struct TetComplex {
+    /// The triangulation.
+    pub dt: Delaunay,
+    /// Unit normal per vertex (zero when unknown).
+    pub normals: Vec<[f64; 3]>,
+    /// Normalised quadric per vertex.
+    pub quadrics: Vec<Quadric>,
+    /// True for the protective corner points.
+    pub protective: Vec<bool>,
+    /// CSR offsets into `incident_tets`, one range per vertex.
+    pub incident_offsets: Vec<u32>,
+    /// Tets incident to each vertex.
+    pub incident_tets: Vec<u32>,
+    /// Edge length of a grid cell in the frame of the points.
+    pub cell_size: f64,
+    /// `h` of the face score (`grid_scale^2` for the `[-1,1]` box).
+    pub h: f64,
+}
+
+impl TetComplex {
+    /// Builds the incidence lists of `dt` and stores the per-vertex data.
+    pub fn new(
+        dt: Delaunay,
+        normals: Vec<[f64; 3]>,
+        quadrics: Vec<Quadric>,
+        protective: Vec<bool>,
+        cell_size: f64,
+        h: f64,
+    ) -> Self {
+        let nv = dt.vertices.len();
+        let mut counts = vec![0u32; nv + 1];
+        for t in &dt.tets {
+            for &v in t {
+                counts[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..nv {
+            counts[i + 1] += counts[i];
+        }
+        let mut fill = counts.clone();
+        let mut incident = vec![0u32; counts[nv] as usize];
+        for (ti, t) in dt.tets.iter().enumerate() {
+            for &v in t {
+                incident[fill[v as usize] as usize] = ti as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        Self {
+            dt,
+            normals,
+            quadrics,
+            protective,
+            incident_offsets: counts,
+            incident_tets: incident,
+            cell_size,
+            h,
+        }
+    }
+
+    /// Number of tets.
+    pub fn n_tets(&self) -> usize {
+        self.dt.tets.len()
+    }
+
+    /// The tets incident to vertex `v`.
+    pub fn incident(&self, v: u32) -> &[u32] {
+        let a = self.incident_offsets[v as usize] as usize;
+        let b = self.incident_offsets[v as usize + 1] as usize;
+        &self.incident_tets[a..b]
+    }
+
+    /// Position of vertex `v`.
+    #[inline]
+    pub fn pos(&self, v: u32) -> &[f64; 3] {
+        &self.dt.vertices[v as usize]
+    }
+
+    /// True when tet `t` has a protective vertex.
+    pub fn touches_protective(&self, t: u32) -> bool {
+        self.dt.tets[t as usize]
+            .iter()
+            .any(|&v| self.protective[v as usize])
+    }
+
+    /// The three vertices of face `k` of tet `t`, ordered with the normal pointing out of `t`.
+    #[inline]
+    pub fn outward_face(&self, t: u32, k: usize) -> [u32; 3] {
+        let tv = self.dt.tets[t as usize];
+        FACES[k].map(|i| tv[i])
+    }
+
+    /// Barycentre of tet `t`.
+    pub fn barycenter(&self, t: u32) -> [f64; 3] {
+        let tv = self.dt.tets[t as usize];
+        let mut b = [0.0; 3];
+        for &v in &tv {
+            let p = self.pos(v);
+            for k in 0..3 {
+                b[k] += 0.25 * p[k];
+            }
+        }
+        b
+    }
+
+    /// Size of tet `t`: the mean squared distance of its vertices to its barycentre.
+    pub fn size(&self, t: u32) -> f64 {
+        let b = self.barycenter(t);
+        self.dt.tets[t as usize]
+            .iter()
+            .map(|&v| {
+                let p = self.pos(v);
+                (p[0] - b[0]).powi(2) + (p[1] - b[1]).powi(2) + (p[2] - b[2]).powi(2)
+            })
+            .sum::<f64>()
+            / 4.0
+    }
+
+    /// Neighbour of `t` across face `k` ([`NONE`] on the hull, which counts as outside).
+    #[inline]
+    pub fn neighbor(&self, t: u32, k: usize) -> u32 {
+        self.dt.neighbors[t as usize][k]
+    }
+
+    /// Debug helper: true when every tet is positively oriented.
+    pub fn all_positive(&self) -> bool {
+        self.dt.tets.iter().all(|tv| {
+            orient3d(self.pos(tv[0]), self.pos(tv[1]), self.pos(tv[2]), self.pos(tv[3])) > 0
+        })
+    }
+}
+
+/// True when `nb` counts as outside under `labels` (hull faces border the outside).
+#[inline]
+pub fn is_outside(labels: &[Label], nb: u32) -> bool {
+    nb == NONE || labels[nb as usize] == Label::Outside
+}

@@ -1,0 +1,34 @@
+//! Step 4 of the mesher: the triangles between inside and outside tets, oriented outward.
+
+use crate::complex::{FACES, Label, TetComplex, is_outside};
+use crate::trimesh::TriMesh;
+
+/// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the
+/// used ones. Also returns, for each output vertex, its Delaunay vertex index.
+pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>) {
+    let mut faces = Vec::new();
+    for (t, tv) in cx.dt.tets.iter().enumerate() {
+        if labels[t] != Label::Inside {
+            continue;
+        }
+        for (k, f) in FACES.iter().enumerate() {
+            if is_outside(labels, cx.neighbor(t as u32, k)) {
+                faces.push(f.map(|i| tv[i]));
+            }
+        }
+    }
+    let mut map = vec![u32::MAX; cx.dt.vertices.len()];
+    let mut back = Vec::new();
+    let mut vertices = Vec::new();
+    for f in &mut faces {
+        for v in f.iter_mut() {
+            if map[*v as usize] == u32::MAX {
+                map[*v as usize] = vertices.len() as u32;
+                vertices.push(*cx.pos(*v));
+                back.push(*v);
+            }
+            *v = map[*v as usize];
+        }
+    }
+    (TriMesh { vertices, faces }, back)
+}

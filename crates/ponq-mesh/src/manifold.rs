@@ -1,0 +1,220 @@
+//! Beyond the paper: relabel tets until the inside/outside boundary is a strict 2-manifold.
+//!
+//! The boundary of a union of tets is closed and embedded, but inside tets that touch only
+//! along an edge or at a vertex make non-manifold edges and vertices. Around a vertex `v`, the
+//! tets of its star tile a sphere (its link, closed by a virtual "exterior" tet on the hull);
+//! the surface is a manifold disc at `v` exactly when the inside tets of the star form one
+//! face-connected group and the outside tets one group (a non-manifold edge `vw` also splits
+//! the groups of `v`). Where there are more groups, the group whose flip raises the cut energy
+//! the least is flipped to the other label, and the neighbourhood is checked again.
+//!
+//! Termination: a tet is flipped at most once by the cost-driven rule; when every candidate
+//! group holds an already-flipped tet, an inside group is flipped outside (monotone fallback),
+//! so the inside set can only shrink from then on. Protective tets never become inside.
+
+use crate::complex::{Label, TetComplex};
+use crate::delaunay::NONE;
+use crate::score::face_scores;
+
+/// What the repair did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ManifoldStats {
+    /// Vertices found non-manifold (counted each time one is repaired).
+    pub repairs: usize,
+    /// Tets whose label changed.
+    pub flipped_tets: usize,
+    /// Repairs that needed the monotone fallback.
+    pub fallbacks: usize,
+}
+
+/// Groups of the star of `v`: `(label, tets)`; the exterior (hull) joins an outside group,
+/// marked by `has_exterior`.
+struct Group {
+    label: Label,
+    tets: Vec<u32>,
+    has_exterior: bool,
+}
+
+fn star_groups(cx: &TetComplex, labels: &[Label], v: u32) -> Vec<Group> {
+    let inc = cx.incident(v);
+    let n = inc.len();
+    // Local union-find over inc + exterior (index n).
+    let mut parent: Vec<usize> = (0..=n).collect();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    let local = |t: u32| inc.iter().position(|&x| x == t);
+    let mut exterior_used = false;
+    for (i, &t) in inc.iter().enumerate() {
+        let tv = cx.dt.tets[t as usize];
+        let lt = labels[t as usize];
+        for k in 0..4 {
+            if tv[k] == v {
+                continue; // face opposite v does not contain v
+            }
+            let nb = cx.neighbor(t, k);
+            let (j, lj) = if nb == NONE {
+                exterior_used = true;
+                (n, Label::Outside)
+            } else {
+                match local(nb) {
+                    Some(j) => (j, labels[nb as usize]),
+                    None => continue,
+                }
+            };
+            if lj == lt {
+                let (a, b) = (find(&mut parent, i), find(&mut parent, j));
+                if a != b {
+                    parent[a] = b;
+                }
+            }
+        }
+    }
+    let mut groups: Vec<Group> = Vec::new();
+    let mut root_group: Vec<usize> = vec![usize::MAX; n + 1];
+    for i in 0..=n {
+        if i == n && !exterior_used {
+            continue;
+        }
+        let r = find(&mut parent, i);
+        if root_group[r] == usize::MAX {
+            root_group[r] = groups.len();
+            groups.push(Group {
+                label: if i == n {
+                    Label::Outside
+                } else {
+                    labels[inc[i] as usize]
+                },
+                tets: Vec::new(),
+                has_exterior: false,
+            });
+        }
+        let g = &mut groups[root_group[r]];
+        if i == n {
+            g.has_exterior = true;
+        } else {
+            g.tets.push(inc[i]);
+        }
+    }
+    groups
+}
+
+/// Change of the cut energy when every tet of `set` (all with label `from`) takes the other
+/// label.
+fn flip_cost(cx: &TetComplex, labels: &[Label], set: &[u32], from: Label) -> f64 {
+    let mut delta = 0.0;
+    for &t in set {
+        for k in 0..4 {
+            let nb = cx.neighbor(t, k);
+            if nb != NONE && set.contains(&nb) {
+                continue;
+            }
+            let nl = if nb == NONE {
+                Label::Outside
+            } else {
+                labels[nb as usize]
+            };
+            let (out_of_t, into_t) = face_scores(cx, t, k);
+            // Cost of the face now and after the flip.
+            let cost = |lt: Label| match (lt, nl) {
+                (Label::Inside, Label::Outside) => out_of_t,
+                (Label::Outside, Label::Inside) => into_t,
+                _ => 0.0,
+            };
+            let to = if from == Label::Inside {
+                Label::Outside
+            } else {
+                Label::Inside
+            };
+            delta += cost(to) - cost(from);
+        }
+    }
+    delta
+}
+
+/// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.
+/// `labels` must hold no [`Label::Unknown`].
+pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
+    let mut stats = ManifoldStats::default();
+    let nv = cx.dt.vertices.len();
+    let mut flipped = vec![false; labels.len()];
+    let mut queued = vec![false; nv];
+    let mut work: Vec<u32> = Vec::new();
+    for v in 0..nv as u32 {
+        let inc = cx.incident(v);
+        if inc.iter().any(|&t| labels[t as usize] == Label::Inside) {
+            queued[v as usize] = true;
+            work.push(v);
+        }
+    }
+    while let Some(v) = work.pop() {
+        queued[v as usize] = false;
+        let groups = star_groups(cx, labels, v);
+        let n_in = groups.iter().filter(|g| g.label == Label::Inside).count();
+        if n_in == 0 || groups.len() <= 2 {
+            continue;
+        }
+        stats.repairs += 1;
+        let mut best: Option<(f64, usize)> = None;
+        for (gi, g) in groups.iter().enumerate() {
+            if g.tets.iter().any(|&t| flipped[t as usize]) {
+                continue;
+            }
+            if g.label == Label::Outside
+                && (g.has_exterior || g.tets.iter().any(|&t| cx.touches_protective(t)))
+            {
+                continue;
+            }
+            let c = flip_cost(cx, labels, &g.tets, g.label);
+            if best.is_none_or(|(bc, _)| c < bc) {
+                best = Some((c, gi));
+            }
+        }
+        let chosen = match best {
+            Some((_, gi)) => gi,
+            None => {
+                stats.fallbacks += 1;
+                // Monotone fallback: the cheapest inside group goes outside.
+                let mut fb: Option<(f64, usize)> = None;
+                for (gi, g) in groups.iter().enumerate() {
+                    if g.label == Label::Inside {
+                        let c = flip_cost(cx, labels, &g.tets, Label::Inside);
+                        if fb.is_none_or(|(bc, _)| c < bc) {
+                            fb = Some((c, gi));
+                        }
+                    }
+                }
+                match fb {
+                    Some((_, gi)) => gi,
+                    None => continue,
+                }
+            }
+        };
+        let g = &groups[chosen];
+        let to = if g.label == Label::Inside {
+            Label::Outside
+        } else {
+            Label::Inside
+        };
+        for &t in &g.tets {
+            labels[t as usize] = to;
+            flipped[t as usize] = true;
+            stats.flipped_tets += 1;
+            for &w in &cx.dt.tets[t as usize] {
+                if !queued[w as usize] {
+                    queued[w as usize] = true;
+                    work.push(w);
+                }
+            }
+        }
+        if !queued[v as usize] {
+            queued[v as usize] = true;
+            work.push(v);
+        }
+    }
+    stats
+}

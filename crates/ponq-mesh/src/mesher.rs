@@ -1,0 +1,259 @@
+//! The whole PoNQ meshing pipeline: PoNQ -> Delaunay -> tags -> min cut -> manifold -> mesh.
+
+use std::time::{Duration, Instant};
+
+use crate::complex::{Label, TetComplex};
+use crate::cut::{CutStats, min_cut};
+use crate::delaunay::Delaunay;
+use crate::error::{Error, Result};
+use crate::extract::extract_boundary;
+use crate::manifold::{ManifoldStats, make_manifold};
+use crate::open_surface::cull_open;
+use crate::ponq::Ponq;
+use crate::quadric::Quadric;
+use crate::tagging::tag_all;
+use crate::trimesh::TriMesh;
+
+/// Options of [`mesh_ponq`].
+#[derive(Debug, Clone)]
+pub struct MeshingOptions {
+    /// Grid resolution `N` the PoNQ comes from (cells per side of the domain): sets the
+    /// face-score weight `h = N^2` and the small-tet threshold.
+    pub grid_scale: f64,
+    /// The domain box `(min, max)`; its corners are the protective points. Default `[-1,1]^3`.
+    /// It is enlarged (by one cell) when some v* lies outside it.
+    pub domain: ([f64; 3], [f64; 3]),
+    /// Small-tet rule factor: threshold `factor * cell^2` (authors: 3).
+    pub small_tet_factor: f64,
+    /// Relabel tets so that the output is a strict manifold (default true).
+    pub manifold: bool,
+    /// Open-surface culling: keep a triangle only if one of its vertices has anisotropy
+    /// `lambda2/lambda1 <= t` (the paper uses 0.35 to 0.4). `None` keeps the closed mesh.
+    pub open_threshold: Option<f64>,
+}
+
+impl Default for MeshingOptions {
+    fn default() -> Self {
+        Self {
+            grid_scale: 32.0,
+            domain: ([-1.0; 3], [1.0; 3]),
+            small_tet_factor: 3.0,
+            manifold: true,
+            open_threshold: None,
+        }
+    }
+}
+
+/// Time spent in each stage.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StageTimes {
+    /// v* solve and quadric normalisation.
+    pub prepare: Duration,
+    /// Delaunay tetrahedralisation.
+    pub delaunay: Duration,
+    /// Tagging (incidence lists included).
+    pub tagging: Duration,
+    /// Minimum cut (scores included).
+    pub cut: Duration,
+    /// Manifold repair.
+    pub manifold: Duration,
+    /// Boundary extraction (and open-surface culling).
+    pub extraction: Duration,
+}
+
+impl StageTimes {
+    /// Sum of all stages.
+    pub fn total(&self) -> Duration {
+        self.prepare + self.delaunay + self.tagging + self.cut + self.manifold + self.extraction
+    }
+}
+
+/// Counts and timings of one meshing run.
+#[derive(Debug, Clone, Default)]
+pub struct MeshingStats {
+    /// Input points.
+    pub points: usize,
+    /// Distinct Delaunay vertices (protective corners included).
+    pub vertices: usize,
+    /// Tetrahedra.
+    pub tets: usize,
+    /// Tets tagged inside / outside / unknown before the cut.
+    pub tagged: [usize; 3],
+    /// The cut problem.
+    pub cut: CutStats,
+    /// The manifold repair.
+    pub manifold: ManifoldStats,
+    /// Stage timings.
+    pub times: StageTimes,
+}
+
+/// Result of [`mesh_ponq`].
+#[derive(Debug, Clone)]
+pub struct MeshingOutput {
+    /// The mesh (empty when no tet is inside; see `message`).
+    pub mesh: TriMesh,
+    /// For each output vertex, the index of the input point it comes from.
+    pub source_point: Vec<u32>,
+    /// Counts and timings.
+    pub stats: MeshingStats,
+    /// A human-readable note when the result is empty or degenerate.
+    pub message: Option<String>,
+}
+
+fn unit(n: [f64; 3]) -> [f64; 3] {
+    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if l > 0.0 && l.is_finite() {
+        n.map(|x| x / l)
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// Meshes a PoNQ: the output is closed, oriented, free of self-intersections and (with
+/// `manifold`) a strict 2-manifold, or empty with a `message`.
+///
+/// # Errors
+/// [`Error::InvalidInput`] for a non-positive or non-finite `grid_scale`, a degenerate domain,
+/// or non-finite data.
+pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
+    if !(opts.grid_scale > 0.0 && opts.grid_scale.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "grid scale must be a positive number, got {}",
+            opts.grid_scale
+        )));
+    }
+    let (dlo, dhi) = opts.domain;
+    if (0..3).any(|k| !(dhi[k] > dlo[k]) || !dlo[k].is_finite() || !dhi[k].is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "domain box {dlo:?}..{dhi:?} is empty or not finite"
+        )));
+    }
+    let mut stats = MeshingStats {
+        points: ponq.len(),
+        ..Default::default()
+    };
+    let t0 = Instant::now();
+    let vstars = ponq.vstars();
+    if let Some(i) = vstars.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+        return Err(Error::InvalidInput(format!("v*[{i}] is not finite")));
+    }
+    let extent = (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
+    let cell = extent / opts.grid_scale;
+    // Protective box: the domain, enlarged by a cell where some v* leaves it.
+    let (mut lo, mut hi) = (dlo, dhi);
+    for p in &vstars {
+        for k in 0..3 {
+            if p[k] <= lo[k] {
+                lo[k] = p[k] - cell;
+            }
+            if p[k] >= hi[k] {
+                hi[k] = p[k] + cell;
+            }
+        }
+    }
+    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+    let mut points = vstars;
+    for i in 0..8 {
+        points.push([
+            if i & 1 == 0 { lo[0] } else { hi[0] },
+            if i & 2 == 0 { lo[1] } else { hi[1] },
+            if i & 4 == 0 { lo[2] } else { hi[2] },
+        ]);
+    }
+    stats.times.prepare = t0.elapsed();
+
+    let t1 = Instant::now();
+    let dt = Delaunay::new(&points)?;
+    stats.times.delaunay = t1.elapsed();
+
+    let t2 = Instant::now();
+    // Per-vertex data; duplicates of one position are merged (quadrics summed, normals averaged).
+    let nv = dt.vertices.len();
+    let m = ponq.len();
+    let mut normals = vec![[0.0; 3]; nv];
+    let mut quadrics = vec![Quadric::zero(); nv];
+    let mut protective = vec![false; nv];
+    let mut source = vec![u32::MAX; nv];
+    for (i, &v) in dt.vertex_of_point.iter().enumerate() {
+        let v = v as usize;
+        if i >= m {
+            protective[v] = true;
+            let c = points[i];
+            normals[v] = unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]);
+            quadrics[v] = Quadric::identity_at(c);
+            source[v] = u32::MAX;
+            continue;
+        }
+        if source[v] == u32::MAX {
+            source[v] = i as u32;
+        }
+        let n = unit(ponq.normals[i]);
+        for k in 0..3 {
+            normals[v][k] += n[k];
+        }
+        quadrics[v] += ponq.quadrics[i].normalized();
+    }
+    for v in 0..nv {
+        normals[v] = unit(normals[v]);
+        quadrics[v] = quadrics[v].normalized();
+    }
+    stats.vertices = nv;
+    stats.tets = dt.tets.len();
+    let cx = TetComplex::new(
+        dt,
+        normals,
+        quadrics,
+        protective,
+        cell,
+        opts.grid_scale * opts.grid_scale,
+    );
+    let mut labels = tag_all(&cx, opts.small_tet_factor);
+    for l in &labels {
+        match l {
+            Label::Inside => stats.tagged[0] += 1,
+            Label::Outside => stats.tagged[1] += 1,
+            Label::Unknown => stats.tagged[2] += 1,
+        }
+    }
+    stats.times.tagging = t2.elapsed();
+
+    let t3 = Instant::now();
+    stats.cut = min_cut(&cx, &mut labels);
+    stats.times.cut = t3.elapsed();
+
+    let t4 = Instant::now();
+    if opts.manifold {
+        stats.manifold = make_manifold(&cx, &mut labels);
+    }
+    stats.times.manifold = t4.elapsed();
+
+    let t5 = Instant::now();
+    let (mut mesh, back) = extract_boundary(&cx, &labels);
+    let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
+    if let Some(th) = opts.open_threshold {
+        let aniso: Vec<f64> = back
+            .iter()
+            .map(|&v| cx.quadrics[v as usize].anisotropy())
+            .collect();
+        let keep = cull_open(&mut mesh, &aniso, th);
+        source_point = keep.iter().map(|&i| source_point[i as usize]).collect();
+    }
+    stats.times.extraction = t5.elapsed();
+
+    let message = if m == 0 {
+        Some("the PoNQ has no point: empty mesh".to_string())
+    } else if mesh.faces.is_empty() {
+        Some(format!(
+            "no tetrahedron was labelled inside ({} points, {} tets): empty mesh",
+            m, stats.tets
+        ))
+    } else {
+        None
+    };
+    Ok(MeshingOutput {
+        mesh,
+        source_point,
+        stats,
+        message,
+    })
+}

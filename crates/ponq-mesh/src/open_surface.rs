@@ -1,0 +1,33 @@
+//! Open surfaces: after meshing, drop the triangles that close the holes (SPEC section 6).
+//!
+//! Boundary samples with rotated normals make the quadrics of boundary points elongated
+//! ("cigars", anisotropy `lambda2/lambda1` close to 1), while points on the surface are flat
+//! ("pancakes", close to 0). A triangle is kept only if one of its vertices has anisotropy
+//! at most the threshold.
+
+use crate::trimesh::TriMesh;
+
+/// Default anisotropy threshold.
+pub const DEFAULT_OPEN_THRESHOLD: f64 = 0.35;
+
+/// Culls in place the triangles whose three vertices all have `anisotropy > threshold`,
+/// removes unused vertices, and returns for each remaining vertex its index before culling.
+pub fn cull_open(mesh: &mut TriMesh, anisotropy: &[f64], threshold: f64) -> Vec<u32> {
+    mesh.faces
+        .retain(|f| f.iter().any(|&v| anisotropy[v as usize] <= threshold));
+    let mut map = vec![u32::MAX; mesh.vertices.len()];
+    let mut keep = Vec::new();
+    let mut verts = Vec::new();
+    for f in &mut mesh.faces {
+        for v in f.iter_mut() {
+            if map[*v as usize] == u32::MAX {
+                map[*v as usize] = verts.len() as u32;
+                verts.push(mesh.vertices[*v as usize]);
+                keep.push(*v);
+            }
+            *v = map[*v as usize];
+        }
+    }
+    mesh.vertices = verts;
+    keep
+}

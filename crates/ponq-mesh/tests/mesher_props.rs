@@ -1,0 +1,247 @@
+//! The mesher's guarantees on many structured and random inputs: the output is closed,
+//! oriented, manifold and free of self-intersections (exact check), or empty with a message.
+
+mod common;
+
+use common::*;
+use ponq_mesh::mesher::{MeshingOptions, MeshingOutput, mesh_ponq};
+use ponq_mesh::validity;
+use ponq_mesh::{Ponq, Quadric};
+use rand::Rng;
+
+fn mesh(ponq: &Ponq, grid: f64) -> MeshingOutput {
+    mesh_ponq(
+        ponq,
+        &MeshingOptions {
+            grid_scale: grid,
+            ..Default::default()
+        },
+    )
+    .expect("meshing succeeds on finite input")
+}
+
+/// Valid, or empty with a message.
+fn assert_valid(out: &MeshingOutput, what: &str) {
+    if out.mesh.faces.is_empty() {
+        assert!(out.message.is_some(), "{what}: empty mesh without message");
+        return;
+    }
+    let r = validity::check(&out.mesh);
+    assert!(r.is_valid(), "{what}: {r}");
+}
+
+fn volume(m: &ponq_mesh::TriMesh) -> f64 {
+    m.faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|v| m.vertices[v as usize]);
+            (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                / 6.0
+        })
+        .sum()
+}
+
+#[test]
+fn sphere_is_watertight_with_the_right_volume() {
+    let s = sphere_samples([0.05, -0.1, 0.0], 0.6, 40_000, &mut rng(1));
+    let ponq = ponq_by_grid(&s, 32);
+    let out = mesh(&ponq, 32.0);
+    assert_valid(&out, "sphere");
+    let v = volume(&out.mesh);
+    let exact = 4.0 / 3.0 * std::f64::consts::PI * 0.6f64.powi(3);
+    assert!((v - exact).abs() / exact < 0.05, "volume {v} vs {exact}");
+}
+
+#[test]
+fn box_keeps_its_corners_sharp() {
+    let s = box_samples([-0.5, -0.4, -0.3], [0.5, 0.4, 0.3], 60_000, &mut rng(2));
+    let ponq = ponq_by_grid(&s, 16);
+    let out = mesh(&ponq, 16.0);
+    assert_valid(&out, "box");
+    let v = volume(&out.mesh);
+    assert!((v - 0.48).abs() / 0.48 < 0.02, "volume {v}");
+    // The QEM-optimal vertices recover the 8 corners exactly (up to round-off).
+    let corners_found = (0..8)
+        .filter(|i| {
+            let c = [
+                if i & 1 == 0 { -0.5 } else { 0.5 },
+                if i & 2 == 0 { -0.4 } else { 0.4 },
+                if i & 4 == 0 { -0.3 } else { 0.3 },
+            ];
+            out.mesh.vertices.iter().any(|p| {
+                (p[0] - c[0]).abs() < 1e-6 && (p[1] - c[1]).abs() < 1e-6 && (p[2] - c[2]).abs() < 1e-6
+            })
+        })
+        .count();
+    assert_eq!(corners_found, 8);
+}
+
+#[test]
+fn cad_like_unions_and_thin_plates() {
+    let mut r = rng(3);
+    for case in 0..6 {
+        let mut s = Samples {
+            points: vec![],
+            normals: vec![],
+        };
+        // Two overlapping boxes' surfaces plus a thin plate and a cylinder: self-overlapping
+        // sample sets make ambiguous, CAD-like configurations.
+        for _ in 0..3 {
+            let c: [f64; 3] = std::array::from_fn(|_| r.random_range(-0.4..0.4));
+            let h: [f64; 3] = std::array::from_fn(|k| {
+                if k == case % 3 { r.random_range(0.02..0.08) } else { r.random_range(0.1..0.4) }
+            });
+            let b = box_samples(
+                [c[0] - h[0], c[1] - h[1], c[2] - h[2]],
+                [c[0] + h[0], c[1] + h[1], c[2] + h[2]],
+                15_000,
+                &mut r,
+            );
+            s.points.extend(b.points);
+            s.normals.extend(b.normals);
+        }
+        let cy = cylinder_samples(0.25, -0.6, 0.6, 15_000, &mut r);
+        s.points.extend(cy.points);
+        s.normals.extend(cy.normals);
+        for grid in [16usize, 32] {
+            let out = mesh(&ponq_by_grid(&s, grid), grid as f64);
+            assert_valid(&out, &format!("case {case} grid {grid}"));
+            assert!(!out.mesh.faces.is_empty());
+        }
+    }
+}
+
+#[test]
+fn random_garbage_ponqs_still_give_valid_meshes() {
+    let mut r = rng(4);
+    for case in 0..40 {
+        let m = r.random_range(0..300);
+        let mut pts = Vec::new();
+        let mut nrm = Vec::new();
+        let mut q = Vec::new();
+        for _ in 0..m {
+            let p: [f64; 3] = std::array::from_fn(|_| r.random_range(-1.2..1.2));
+            let n: [f64; 3] = std::array::from_fn(|_| r.random_range(-1.0..1.0));
+            let u: [f64; 6] = std::array::from_fn(|_| r.random_range(-2.0..2.0));
+            pts.push(p);
+            nrm.push(n);
+            q.push(Quadric::from_a_vstar(Quadric::a_from_upper(u), p));
+        }
+        let ponq = Ponq::new(pts.clone(), nrm, q, Some(pts)).unwrap();
+        let out = mesh(&ponq, 8.0);
+        assert_valid(&out, &format!("garbage case {case}"));
+    }
+}
+
+#[test]
+fn exact_lattices_and_duplicates() {
+    // PoNQ-lite-like input: v* exactly on a lattice, normals of a sphere, each point twice.
+    let mut pts = Vec::new();
+    let mut nrm = Vec::new();
+    let n = 12;
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let p = [
+                    -0.55 + 0.1 * i as f64,
+                    -0.55 + 0.1 * j as f64,
+                    -0.55 + 0.1 * k as f64,
+                ];
+                let rr = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                if (rr - 0.45).abs() < 0.1 {
+                    for _ in 0..2 {
+                        pts.push(p);
+                        nrm.push(p.map(|x| x / rr));
+                    }
+                }
+            }
+        }
+    }
+    let q: Vec<Quadric> = pts
+        .iter()
+        .zip(&nrm)
+        .map(|(p, n)| Quadric::from_plane(*p, *n))
+        .collect();
+    let ponq = Ponq::new(pts.clone(), nrm, q, Some(pts)).unwrap();
+    let out = mesh(&ponq, 20.0);
+    assert_valid(&out, "lattice");
+    assert!(!out.mesh.faces.is_empty());
+}
+
+#[test]
+fn tiny_and_degenerate_inputs() {
+    let mk = |pts: Vec<[f64; 3]>, n: [f64; 3]| {
+        let q = pts.iter().map(|p| Quadric::from_plane(*p, n)).collect();
+        let nn = vec![n; pts.len()];
+        Ponq::new(pts.clone(), nn, q, Some(pts)).unwrap()
+    };
+    let cases: Vec<(&str, Ponq)> = vec![
+        ("empty", Ponq::default()),
+        ("one", mk(vec![[0.0; 3]], [0.0, 0.0, 1.0])),
+        ("two", mk(vec![[0.0; 3], [0.1, 0.0, 0.0]], [0.0, 0.0, 1.0])),
+        (
+            "three",
+            mk(vec![[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [0.0, 0.0, 1.0]),
+        ),
+        (
+            "four",
+            mk(
+                vec![[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]],
+                [1.0, 1.0, 1.0],
+            ),
+        ),
+        (
+            "coplanar",
+            mk(
+                (0..100)
+                    .map(|i| [(i % 10) as f64 * 0.1 - 0.5, (i / 10) as f64 * 0.1 - 0.5, 0.25])
+                    .collect(),
+                [0.0, 0.0, 1.0],
+            ),
+        ),
+        (
+            "all the same point",
+            mk(vec![[0.3, 0.3, 0.3]; 50], [0.0, 1.0, 0.0]),
+        ),
+        (
+            "on the domain corners",
+            mk(
+                vec![[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 0.0, 0.0]],
+                [0.0, 0.0, 1.0],
+            ),
+        ),
+        (
+            "outside the domain",
+            mk(
+                vec![[3.0, 0.0, 0.0], [-2.5, 1.0, 0.0], [0.0, 4.0, -3.0], [0.5, 0.5, 0.5]],
+                [1.0, 0.0, 0.0],
+            ),
+        ),
+        (
+            "zero normals",
+            mk(sphere_samples([0.0; 3], 0.5, 200, &mut rng(9)).points, [0.0; 3]),
+        ),
+    ];
+    for (name, p) in cases {
+        let out = mesh(&p, 16.0);
+        assert_valid(&out, name);
+    }
+}
+
+#[test]
+fn bad_options_are_errors_not_panics() {
+    let p = Ponq::default();
+    for g in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let o = MeshingOptions {
+            grid_scale: g,
+            ..Default::default()
+        };
+        assert!(mesh_ponq(&p, &o).is_err());
+    }
+    let o = MeshingOptions {
+        domain: ([0.0; 3], [0.0; 3]),
+        ..Default::default()
+    };
+    assert!(mesh_ponq(&p, &o).is_err());
+}

@@ -47,7 +47,7 @@ fn star_groups(cx: &TetComplex, labels: &[Label], v: u32) -> Vec<Group> {
         }
         x
     }
-    let local = |t: u32| inc.iter().position(|&x| x == t);
+    let local = |t: u32| inc.binary_search(&t).ok();
     let mut exterior_used = false;
     for (i, &t) in inc.iter().enumerate() {
         let tv = cx.dt.tets[t as usize];

@@ -24,8 +24,37 @@ fn c3(p: &[f64; 3]) -> Coord3D<f64> {
 }
 
 /// Exact sign (-1, 0, 1) of `det[b-a, c-a, d-a]`.
+///
+/// A semi-static floating-point filter decides almost every call; the uncertain ones go to
+/// Shewchuk's adaptive exact predicate.
 #[inline]
 pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
+    let (bx, by, bz) = (b[0] - a[0], b[1] - a[1], b[2] - a[2]);
+    let (cx, cy, cz) = (c[0] - a[0], c[1] - a[1], c[2] - a[2]);
+    let (dx, dy, dz) = (d[0] - a[0], d[1] - a[1], d[2] - a[2]);
+    let det = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+    let mx = bx.abs().max(cx.abs()).max(dx.abs());
+    let my = by.abs().max(cy.abs()).max(dy.abs());
+    let mz = bz.abs().max(cz.abs()).max(dz.abs());
+    let lo = mx.min(my).min(mz);
+    let hi = mx.max(my).max(mz);
+    // Error bound of this evaluation (differences included) is below 6e-15 * mx*my*mz
+    // (CGAL's static filter has 5.11e-15 for the same expression); 2e-14 leaves a margin.
+    if lo > 1e-60 && hi < 1e60 {
+        let eps = 2e-14 * mx * my * mz;
+        if det > eps {
+            return 1;
+        }
+        if det < -eps {
+            return -1;
+        }
+    }
+    orient3d_exact(a, b, c, d)
+}
+
+#[cold]
+#[inline(never)]
+fn orient3d_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
     // robust::orient3d(a, b, c, d) = det[a-d, b-d, c-d] = -det[b-a, c-a, d-a].
     let v = robust::orient3d(c3(a), c3(b), c3(c), c3(d));
     if v < 0.0 {
@@ -39,8 +68,56 @@ pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
 
 /// Exact sign of the insphere determinant for a positively oriented tetrahedron `(a, b, c, d)`:
 /// `1` if `e` is strictly inside its circumsphere, `-1` strictly outside, `0` on it.
+///
+/// A semi-static floating-point filter decides almost every call; the uncertain ones go to
+/// Shewchuk's adaptive exact predicate.
 #[inline]
 pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> i32 {
+    let (ax, ay, az) = (a[0] - e[0], a[1] - e[1], a[2] - e[2]);
+    let (bx, by, bz) = (b[0] - e[0], b[1] - e[1], b[2] - e[2]);
+    let (cx, cy, cz) = (c[0] - e[0], c[1] - e[1], c[2] - e[2]);
+    let (dx, dy, dz) = (d[0] - e[0], d[1] - e[1], d[2] - e[2]);
+    let a2 = ax * ax + ay * ay + az * az;
+    let b2 = bx * bx + by * by + bz * bz;
+    let c2 = cx * cx + cy * cy + cz * cz;
+    let d2 = dx * dx + dy * dy + dz * dz;
+    // det | a-e, |a-e|^2 ; b-e ... ; d-e ... | by 2x2 minors of the xy columns.
+    let ab = ax * by - bx * ay;
+    let ac = ax * cy - cx * ay;
+    let ad = ax * dy - dx * ay;
+    let bc = bx * cy - cx * by;
+    let bd = bx * dy - dx * by;
+    let cd = cx * dy - dx * cy;
+    let abc = az * bc - bz * ac + cz * ab;
+    let abd = az * bd - bz * ad + dz * ab;
+    let acd = az * cd - cz * ad + dz * ac;
+    let bcd = bz * cd - cz * bd + dz * bc;
+    // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
+    // negative when e is inside the sphere of a positively oriented (a, b, c, d).
+    let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
+    let mx = ax.abs().max(bx.abs()).max(cx.abs()).max(dx.abs());
+    let my = ay.abs().max(by.abs()).max(cy.abs()).max(dy.abs());
+    let mz = az.abs().max(bz.abs()).max(cz.abs()).max(dz.abs());
+    let lo = mx.min(my).min(mz);
+    let hi = mx.max(my).max(mz);
+    // Every one of the 24 Leibniz terms is at most mx*my*mz*3*hi^2 and carries a relative
+    // error of a few ulps (differences included), so |error| < 3e-13 * mx*my*mz*hi^2;
+    // CGAL's static filter uses 1.25e-13 for this determinant. 1e-12 leaves a margin.
+    if lo > 1e-40 && hi < 1e40 {
+        let eps = 1e-12 * mx * my * mz * hi * hi;
+        if det > eps {
+            return -1;
+        }
+        if det < -eps {
+            return 1;
+        }
+    }
+    insphere_exact(a, b, c, d, e)
+}
+
+#[cold]
+#[inline(never)]
+fn insphere_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> i32 {
     // robust::insphere is positive for "inside" when robust::orient3d(a,b,c,d) > 0, which is
     // our negative orientation: flip the sign.
     let v = robust::insphere(c3(a), c3(b), c3(c), c3(d), c3(e));
@@ -161,6 +238,42 @@ mod tests {
         assert!(!in_conflict([&O, &X, &Y, &Z], [9, 1, 2, 3], &p, 4));
         // Largest index is Z: orient3d(O, X, Y, p) > 0.
         assert!(in_conflict([&O, &X, &Y, &Z], [0, 1, 2, 9], &p, 4));
+    }
+
+    #[test]
+    fn filters_agree_with_the_exact_predicates() {
+        let mut seed = 7u64;
+        let mut r = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for i in 0..20000 {
+            let mut p: [[f64; 3]; 5] = std::array::from_fn(|_| [r(), r(), r()]);
+            if i % 4 == 1 {
+                // Nearly co-spherical / coplanar: e close to a's mirror or on a lattice.
+                p[4] = [p[0][0] + 1e-17, p[0][1], p[0][2] * (1.0 + 1e-16)];
+            }
+            if i % 4 == 2 {
+                for q in &mut p {
+                    *q = q.map(|x| (x * 4.0).round() / 4.0);
+                }
+            }
+            if i % 4 == 3 {
+                for q in &mut p {
+                    *q = q.map(|x| x * 1e-30 + 1.0);
+                }
+            }
+            assert_eq!(
+                orient3d(&p[0], &p[1], &p[2], &p[3]),
+                orient3d_exact(&p[0], &p[1], &p[2], &p[3])
+            );
+            assert_eq!(
+                insphere(&p[0], &p[1], &p[2], &p[3], &p[4]),
+                insphere_exact(&p[0], &p[1], &p[2], &p[3], &p[4])
+            );
+        }
     }
 
     #[test]

@@ -204,6 +204,29 @@ struct Tet {
 
 const DEAD: u32 = u32::MAX;
 
+/// `OTHER_TWO[f][k]`: the two indices of `0..4` other than `f` and `k` (`f != k`).
+const OTHER_TWO: [[[usize; 2]; 4]; 4] = {
+    let mut t = [[[0usize; 2]; 4]; 4];
+    let mut f = 0;
+    while f < 4 {
+        let mut k = 0;
+        while k < 4 {
+            let mut n = 0;
+            let mut s = 0;
+            while s < 4 {
+                if s != f && s != k && n < 2 {
+                    t[f][k][n] = s;
+                    n += 1;
+                }
+                s += 1;
+            }
+            k += 1;
+        }
+        f += 1;
+    }
+    t
+};
+
 struct Builder {
     /// Real vertices followed by the 4 super-tetrahedron vertices.
     pos: Vec<[f64; 3]>,
@@ -455,14 +478,8 @@ impl Builder {
                     continue;
                 }
                 // The face opposite f contains v and the two vertices other than f and k.
-                let mut e = [0u32; 2];
-                let mut n = 0;
-                for (s, &x) in tv.iter().enumerate() {
-                    if s as u8 != f && s as u8 != k {
-                        e[n] = x;
-                        n += 1;
-                    }
-                }
+                let [i0, i1] = OTHER_TWO[f as usize][k as usize];
+                let e = [tv[i0], tv[i1]];
                 let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
                 let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
                 loop {

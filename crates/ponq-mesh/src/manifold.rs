@@ -12,7 +12,7 @@
 //! group holds an already-flipped tet, an inside group is flipped outside (monotone fallback),
 //! so the inside set can only shrink from then on. Protective tets never become inside.
 
-use crate::complex::{Label, TetComplex};
+use crate::complex::{FACES, Label, TetComplex, is_outside};
 use crate::delaunay::NONE;
 use crate::score::face_scores;
 
@@ -136,6 +136,65 @@ fn flip_cost(cx: &TetComplex, labels: &[Label], set: &[u32], from: Label) -> f64
     delta
 }
 
+/// Vertices where the current inside/outside boundary is not a single disc: their boundary
+/// triangles' opposite edges (the vertex's link in the surface) do not form one simple cycle.
+/// A cheap O(#faces) scan that seeds the repair.
+pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
+    // Link edges per vertex, as (vertex, a, b) with a -> b the directed edge opposite it.
+    let mut link: Vec<(u32, u32, u32)> = Vec::new();
+    for (t, tv) in cx.dt.tets.iter().enumerate() {
+        if labels[t] != Label::Inside {
+            continue;
+        }
+        for (k, f) in FACES.iter().enumerate() {
+            if is_outside(labels, cx.neighbor(t as u32, k)) {
+                let [a, b, c] = f.map(|i| tv[i]);
+                link.push((a, b, c));
+                link.push((b, c, a));
+                link.push((c, a, b));
+            }
+        }
+    }
+    link.sort_unstable();
+    let mut bad = Vec::new();
+    let mut i = 0;
+    while i < link.len() {
+        let v = link[i].0;
+        let mut j = i;
+        while j < link.len() && link[j].0 == v {
+            j += 1;
+        }
+        // One simple cycle: every link vertex starts exactly one edge and ends exactly one,
+        // and following the edges from the first one visits all of them.
+        let edges = &link[i..j];
+        let n = edges.len();
+        let mut starts: Vec<u32> = edges.iter().map(|e| e.1).collect();
+        let mut ends: Vec<u32> = edges.iter().map(|e| e.2).collect();
+        starts.sort_unstable();
+        ends.sort_unstable();
+        let simple = starts.windows(2).all(|w| w[0] != w[1])
+            && ends.windows(2).all(|w| w[0] != w[1])
+            && starts == ends;
+        let ok = simple && {
+            // edges are sorted by start: walk the successor map.
+            let next = |x: u32| edges[edges.binary_search_by_key(&x, |e| e.1).unwrap_or(0)].2;
+            let first = edges[0].1;
+            let mut x = next(first);
+            let mut steps = 1;
+            while x != first && steps <= n {
+                x = next(x);
+                steps += 1;
+            }
+            steps == n
+        };
+        if !ok {
+            bad.push(v);
+        }
+        i = j;
+    }
+    bad
+}
+
 /// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.
 /// `labels` must hold no [`Label::Unknown`].
 pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
@@ -143,13 +202,9 @@ pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
     let nv = cx.dt.vertices.len();
     let mut flipped = vec![false; labels.len()];
     let mut queued = vec![false; nv];
-    let mut work: Vec<u32> = Vec::new();
-    for v in 0..nv as u32 {
-        let inc = cx.incident(v);
-        if inc.iter().any(|&t| labels[t as usize] == Label::Inside) {
-            queued[v as usize] = true;
-            work.push(v);
-        }
+    let mut work: Vec<u32> = nonmanifold_surface_vertices(cx, labels);
+    for &v in &work {
+        queued[v as usize] = true;
     }
     while let Some(v) = work.pop() {
         queued[v as usize] = false;

@@ -14,6 +14,18 @@
 
 use robust::Coord3D;
 
+/// `max` without NaN handling (one `maxsd`); the filters fall back to the exact predicate when a
+/// bound is not finite.
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
 #[inline(always)]
 fn c3(p: &[f64; 3]) -> Coord3D<f64> {
     Coord3D {
@@ -33,11 +45,11 @@ pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
     let (cx, cy, cz) = (c[0] - a[0], c[1] - a[1], c[2] - a[2]);
     let (dx, dy, dz) = (d[0] - a[0], d[1] - a[1], d[2] - a[2]);
     let det = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
-    let mx = bx.abs().max(cx.abs()).max(dx.abs());
-    let my = by.abs().max(cy.abs()).max(dy.abs());
-    let mz = bz.abs().max(cz.abs()).max(dz.abs());
-    let lo = mx.min(my).min(mz);
-    let hi = mx.max(my).max(mz);
+    let mx = fmax(fmax(bx.abs(), cx.abs()), dx.abs());
+    let my = fmax(fmax(by.abs(), cy.abs()), dy.abs());
+    let mz = fmax(fmax(bz.abs(), cz.abs()), dz.abs());
+    let lo = fmin(fmin(mx, my), mz);
+    let hi = fmax(fmax(mx, my), mz);
     // Error bound of this evaluation (differences included) is below 6e-15 * mx*my*mz
     // (CGAL's static filter has 5.11e-15 for the same expression); 2e-14 leaves a margin.
     if lo > 1e-60 && hi < 1e60 {
@@ -95,11 +107,11 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
     // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
     // negative when e is inside the sphere of a positively oriented (a, b, c, d).
     let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
-    let mx = ax.abs().max(bx.abs()).max(cx.abs()).max(dx.abs());
-    let my = ay.abs().max(by.abs()).max(cy.abs()).max(dy.abs());
-    let mz = az.abs().max(bz.abs()).max(cz.abs()).max(dz.abs());
-    let lo = mx.min(my).min(mz);
-    let hi = mx.max(my).max(mz);
+    let mx = fmax(fmax(ax.abs(), bx.abs()), fmax(cx.abs(), dx.abs()));
+    let my = fmax(fmax(ay.abs(), by.abs()), fmax(cy.abs(), dy.abs()));
+    let mz = fmax(fmax(az.abs(), bz.abs()), fmax(cz.abs(), dz.abs()));
+    let lo = fmin(fmin(mx, my), mz);
+    let hi = fmax(fmax(mx, my), mz);
     // Every one of the 24 Leibniz terms is at most mx*my*mz*3*hi^2 and carries a relative
     // error of a few ulps (differences included), so |error| < 3e-13 * mx*my*mz*hi^2;
     // CGAL's static filter uses 1.25e-13 for this determinant. 1e-12 leaves a margin.

@@ -1,0 +1,68 @@
+//! Nearest-neighbour queries on point clouds (a thin wrapper over `kiddo`'s immutable k-d tree).
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+
+/// A static point cloud answering exact nearest-neighbour queries.
+///
+/// Invariant: holds at least one point (construction of an empty index returns `None`).
+pub struct PointIndex {
+    tree: ImmutableKdTree<f64, 3>,
+}
+
+impl PointIndex {
+    /// Builds the index; `None` for an empty slice or a slice kiddo rejects.
+    pub fn new(points: &[[f64; 3]]) -> Option<Self> {
+        if points.is_empty() {
+            return None;
+        }
+        ImmutableKdTree::new_from_slice(points)
+            .ok()
+            .map(|tree| Self { tree })
+    }
+
+    /// `(index, squared distance)` of the point nearest to `q`.
+    #[inline]
+    pub fn nearest(&self, q: &[f64; 3]) -> (u32, f64) {
+        let r = self
+            .tree
+            .query(q)
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        (r.item, r.distance)
+    }
+
+    /// Nearest points of many queries, in parallel: `(index, squared distance)` per query.
+    pub fn nearest_many(&self, queries: &[[f64; 3]]) -> Vec<(u32, f64)> {
+        use rayon::prelude::*;
+        queries.par_iter().map(|q| self.nearest(q)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn matches_brute_force() {
+        let pts: Vec<[f64; 3]> = (0..500)
+            .map(|i| {
+                let t = i as f64 * 0.37;
+                [t.sin(), (1.3 * t).cos(), (0.7 * t).sin() * t.cos()]
+            })
+            .collect();
+        let idx = PointIndex::new(&pts).expect("non-empty");
+        for j in 0..100 {
+            let q = [(j as f64 * 0.11).cos(), (j as f64 * 0.23).sin(), 0.3];
+            let (i, d) = idx.nearest(&q);
+            let best = pts
+                .iter()
+                .map(|p| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                .fold(f64::MAX, f64::min);
+            assert!((d - best).abs() < 1e-12, "{d} vs {best}");
+            let p = pts[i as usize];
+            let di = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+            assert!((di - d).abs() < 1e-12);
+        }
+        assert!(PointIndex::new(&[]).is_none());
+    }
+}

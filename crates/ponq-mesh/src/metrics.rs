@@ -125,8 +125,10 @@ fn one_sided(from: &[[f64; 3]], to: &PointIndex) -> Vec<(u32, f64)> {
 /// Nearest matches `a -> b` and `b -> a` (index, squared distance).
 type Matches = (Vec<(u32, f64)>, Vec<(u32, f64)>);
 
-/// `(cd, f1, matches)` of two point sets with a distance threshold (unsquared).
-fn chamfer_f1(a: &[[f64; 3]], b: &[[f64; 3]], tau: f64) -> (f64, f64, Matches) {
+/// `(cd, f1, matches)` of two point sets with a distance threshold (unsquared): `cd` is the
+/// sum of both mean squared nearest distances (not scaled), `f1` the harmonic mean of the
+/// fractions of each set within `tau` of the other. Empty sets give `(inf, 0)`.
+pub fn chamfer_f1(a: &[[f64; 3]], b: &[[f64; 3]], tau: f64) -> (f64, f64, Matches) {
     let (Some(ia), Some(ib)) = (PointIndex::new(a), PointIndex::new(b)) else {
         return (f64::INFINITY, 0.0, (Vec::new(), Vec::new()));
     };

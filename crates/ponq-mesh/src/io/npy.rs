@@ -1,0 +1,573 @@
+//! Standalone NumPy `.npy` arrays of floats, and 3D grids ([`Grid3`]).
+//!
+//! Arrays of dtype `float32` or `float64` (either byte order), in C or Fortran order, are
+//! read into `f64` values in C order (last axis fastest). The header is checked by this
+//! module before the `npyz` crate reads the data, so that malformed or hostile headers
+//! (absurd shapes, structured or object dtypes, deep nesting) give errors, not panics, and no
+//! memory is reserved beyond what the data actually present can fill.
+
+use std::io::{BufReader, Cursor, Read};
+use std::path::Path;
+
+use npyz::WriterBuilder;
+
+use super::{MAX_PREALLOC, write_file};
+use crate::error::{Error, Result};
+
+/// A 3D grid of values stored in C order: `data[(i * dims[1] + j) * dims[2] + k]` is the
+/// value at `(i, j, k)` (x slowest, z fastest).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Grid3 {
+    /// Sizes along x, y, z.
+    pub dims: [usize; 3],
+    /// `dims[0] * dims[1] * dims[2]` values in C order.
+    pub data: Vec<f64>,
+}
+
+impl Grid3 {
+    /// A grid; an [`Error::InvalidInput`] when `data.len()` is not the product of `dims`.
+    pub fn new(dims: [usize; 3], data: Vec<f64>) -> Result<Self> {
+        let n = dims
+            .iter()
+            .try_fold(1usize, |a, &d| a.checked_mul(d))
+            .ok_or_else(|| Error::InvalidInput(format!("grid dimensions {dims:?} overflow")))?;
+        if n != data.len() {
+            return Err(Error::InvalidInput(format!(
+                "a grid of dimensions {dims:?} needs {n} values, got {}",
+                data.len()
+            )));
+        }
+        Ok(Self { dims, data })
+    }
+
+    /// Index in `data` of the value at `(i, j, k)`.
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        (i * self.dims[1] + j) * self.dims[2] + k
+    }
+
+    /// The value at `(i, j, k)`; panics when out of range.
+    #[inline]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> f64 {
+        self.data[self.index(i, j, k)]
+    }
+}
+
+/// An n-dimensional array of floats read from a `.npy` file, in C order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NpyArray {
+    /// The shape.
+    pub shape: Vec<usize>,
+    /// The product of `shape` values in C order (last axis fastest).
+    pub data: Vec<f64>,
+    /// True when the file stored `float32` values (converted exactly to `f64` here).
+    pub was_f32: bool,
+}
+
+/// Reads a `.npy` file holding a float32 or float64 array of any rank (NaN and infinities
+/// are kept; see [`read_npy_grid`] for a checked 3D grid).
+pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray> {
+    let path = path.as_ref();
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    // The file size bounds the data (not for pipes and other special files).
+    let len = match file.metadata() {
+        Ok(m) if m.is_file() => m.len(),
+        _ => u64::MAX,
+    };
+    read_array(BufReader::new(file), len).map_err(|m| Error::format(path, m))
+}
+
+/// Reads a `.npy` file holding a rank-3 float32 or float64 array (C or Fortran order) as a
+/// [`Grid3`] in C order. Errors name the file and say what is wrong: wrong rank, non-float
+/// dtype, a NaN or infinite value (with its index), truncated data.
+pub fn read_npy_grid(path: impl AsRef<Path>) -> Result<Grid3> {
+    let path = path.as_ref();
+    let a = read_npy(path)?;
+    if a.shape.len() != 3 {
+        return Err(Error::format(
+            path,
+            format!(
+                "expected a 3D grid (rank 3), found an array of shape {}",
+                shape_str(&a.shape)
+            ),
+        ));
+    }
+    let dims = [a.shape[0], a.shape[1], a.shape[2]];
+    if let Some(p) = a.data.iter().position(|v| !v.is_finite()) {
+        let k = p % dims[2];
+        let j = (p / dims[2]) % dims[1];
+        let i = p / (dims[2] * dims[1]);
+        return Err(Error::format(
+            path,
+            format!("grid value at [{i}, {j}, {k}] is {}", a.data[p]),
+        ));
+    }
+    Ok(Grid3 { dims, data: a.data })
+}
+
+/// Writes `grid` to `path` as a C-order `float32` `.npy` file of shape `dims`.
+///
+/// Errors: [`Error::InvalidInput`] when `data.len()` does not match `dims` or a value is
+/// not finite or overflows `f32`; [`Error::Io`] (naming the file) when writing fails.
+pub fn write_npy_grid_f32(path: impl AsRef<Path>, grid: &Grid3) -> Result<()> {
+    let path = path.as_ref();
+    let n = grid.dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
+    if n != Some(grid.data.len()) {
+        return Err(Error::InvalidInput(format!(
+            "a grid of dimensions {:?} cannot hold {} values",
+            grid.dims,
+            grid.data.len()
+        )));
+    }
+    if let Some(p) = grid
+        .data
+        .iter()
+        .position(|&v| !v.is_finite() || !(v as f32).is_finite())
+    {
+        return Err(Error::InvalidInput(format!(
+            "grid value {p} = {} is not finite or overflows f32",
+            grid.data[p]
+        )));
+    }
+    let shape = grid.dims.map(|d| d as u64);
+    write_file(path, |w| {
+        let mut npy = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&shape)
+            .writer(w)
+            .begin_nd()?;
+        npy.extend(grid.data.iter().map(|&v| v as f32))?;
+        npy.finish()
+    })
+}
+
+/// Formats a shape like NumPy: `(3,)`, `(2, 3)`.
+pub(crate) fn shape_str(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Header validation: a tiny parser for the Python literal of the header.
+
+/// Largest header accepted (NumPy itself refuses headers above 10 KB by default).
+const MAX_HEADER: usize = 1 << 20;
+/// Deepest nesting of brackets accepted in a header.
+const MAX_DEPTH: usize = 4;
+
+#[derive(Debug, Clone, PartialEq)]
+enum Lit {
+    Str(String),
+    Bool(bool),
+    Int(u64),
+    Seq(Vec<Lit>),
+}
+
+struct LitParser<'a> {
+    s: &'a [u8],
+    i: usize,
+}
+
+impl LitParser<'_> {
+    fn ws(&mut self) {
+        while self.i < self.s.len() && self.s[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+    }
+
+    fn peek(&self) -> Option<u8> {
+        self.s.get(self.i).copied()
+    }
+
+    fn err(&self, what: &str) -> String {
+        format!("malformed npy header ({what} at character {})", self.i)
+    }
+
+    fn value(&mut self, depth: usize) -> std::result::Result<Lit, String> {
+        self.ws();
+        match self.peek() {
+            Some(q @ (b'\'' | b'"')) => {
+                self.i += 1;
+                let mut out = Vec::new();
+                loop {
+                    match self.peek() {
+                        None => return Err(self.err("unterminated string")),
+                        Some(c) if c == q => {
+                            self.i += 1;
+                            break;
+                        }
+                        Some(b'\\') => {
+                            return Err(self.err("escape sequences are not supported"));
+                        }
+                        Some(c) => {
+                            out.push(c);
+                            self.i += 1;
+                        }
+                    }
+                }
+                Ok(Lit::Str(String::from_utf8_lossy(&out).into_owned()))
+            }
+            Some(b'T') if self.s[self.i..].starts_with(b"True") => {
+                self.i += 4;
+                Ok(Lit::Bool(true))
+            }
+            Some(b'F') if self.s[self.i..].starts_with(b"False") => {
+                self.i += 5;
+                Ok(Lit::Bool(false))
+            }
+            Some(c) if c.is_ascii_digit() => {
+                let start = self.i;
+                while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                    self.i += 1;
+                }
+                let digits = std::str::from_utf8(&self.s[start..self.i]).unwrap_or("");
+                let v = digits
+                    .parse::<u64>()
+                    .map_err(|_| format!("npy header: the number {digits} is too large"))?;
+                if matches!(self.peek(), Some(b'L' | b'l')) {
+                    self.i += 1;
+                }
+                Ok(Lit::Int(v))
+            }
+            Some(open @ (b'(' | b'[')) => {
+                if depth >= MAX_DEPTH {
+                    return Err(self.err("nesting too deep"));
+                }
+                let close = if open == b'(' { b')' } else { b']' };
+                self.i += 1;
+                let mut items = Vec::new();
+                loop {
+                    self.ws();
+                    if self.peek() == Some(close) {
+                        self.i += 1;
+                        break;
+                    }
+                    items.push(self.value(depth + 1)?);
+                    self.ws();
+                    match self.peek() {
+                        Some(b',') => self.i += 1,
+                        Some(c) if c == close => {
+                            self.i += 1;
+                            break;
+                        }
+                        _ => return Err(self.err("expected ',' or a closing bracket")),
+                    }
+                }
+                Ok(Lit::Seq(items))
+            }
+            _ => Err(self.err("unexpected character")),
+        }
+    }
+}
+
+/// What the header of a `.npy` says.
+#[derive(Debug, Clone, PartialEq)]
+struct HeaderInfo {
+    descr: String,
+    fortran: bool,
+    shape: Vec<u64>,
+}
+
+fn parse_header_text(text: &[u8]) -> std::result::Result<HeaderInfo, String> {
+    let mut p = LitParser { s: text, i: 0 };
+    p.ws();
+    if p.peek() != Some(b'{') {
+        return Err(p.err("expected '{'"));
+    }
+    p.i += 1;
+    let (mut descr, mut fortran, mut shape) = (None, None, None);
+    loop {
+        p.ws();
+        if p.peek() == Some(b'}') {
+            p.i += 1;
+            break;
+        }
+        let Lit::Str(key) = p.value(1)? else {
+            return Err(p.err("a key that is not a string"));
+        };
+        p.ws();
+        if p.peek() != Some(b':') {
+            return Err(p.err("expected ':'"));
+        }
+        p.i += 1;
+        let val = p.value(1)?;
+        match (key.as_str(), val) {
+            ("descr", Lit::Str(s)) => descr = Some(s),
+            ("descr", Lit::Seq(_)) => {
+                return Err("unsupported dtype: structured arrays are not supported, expected float32 or float64".to_string());
+            }
+            ("fortran_order", Lit::Bool(b)) => fortran = Some(b),
+            ("shape", Lit::Seq(items)) => {
+                let mut dims = Vec::with_capacity(items.len());
+                for it in items {
+                    match it {
+                        Lit::Int(d) => dims.push(d),
+                        _ => return Err("npy header: 'shape' holds a non-integer".to_string()),
+                    }
+                }
+                shape = Some(dims);
+            }
+            (k @ ("descr" | "fortran_order" | "shape"), v) => {
+                return Err(format!("npy header: invalid value {v:?} for '{k}'"));
+            }
+            (k, _) => return Err(format!("npy header: unexpected key '{k}'")),
+        }
+        p.ws();
+        match p.peek() {
+            Some(b',') => p.i += 1,
+            Some(b'}') => {
+                p.i += 1;
+                break;
+            }
+            _ => return Err(p.err("expected ',' or '}'")),
+        }
+    }
+    p.ws();
+    if p.i != text.len() {
+        return Err(p.err("unexpected text after the header dictionary"));
+    }
+    let descr = descr.ok_or("npy header: missing 'descr'")?;
+    let fortran = fortran.ok_or("npy header: missing 'fortran_order'")?;
+    let shape = shape.ok_or("npy header: missing 'shape'")?;
+    Ok(HeaderInfo {
+        descr,
+        fortran,
+        shape,
+    })
+}
+
+/// Element size (4 or 8) of an accepted dtype description.
+fn float_size(descr: &str) -> std::result::Result<usize, String> {
+    let body = descr.strip_prefix(['<', '>', '=', '|']).unwrap_or(descr);
+    match body {
+        "f4" => Ok(4),
+        "f8" => Ok(8),
+        _ => Err(format!(
+            "unsupported dtype '{}': expected float32 ('<f4', '>f4') or float64 ('<f8', '>f8')",
+            descr.chars().take(32).collect::<String>()
+        )),
+    }
+}
+
+fn eof_to_msg(e: std::io::Error, what: &str) -> String {
+    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        format!("truncated {what}")
+    } else {
+        format!("cannot read {what}: {e}")
+    }
+}
+
+/// Reads a whole `.npy` stream of float32/float64 values into C order. `max_bytes` bounds
+/// the size of the stream (the file size or the zip entry size) and caps preallocation.
+pub(crate) fn read_array<R: Read>(
+    mut r: R,
+    max_bytes: u64,
+) -> std::result::Result<NpyArray, String> {
+    let mut pre = [0u8; 8];
+    r.read_exact(&mut pre)
+        .map_err(|e| eof_to_msg(e, "npy header"))?;
+    if &pre[..6] != b"\x93NUMPY" {
+        return Err("not a .npy array (bad magic bytes)".to_string());
+    }
+    let mut prefix = pre.to_vec();
+    let hlen = match pre[6] {
+        1 => {
+            let mut b = [0u8; 2];
+            r.read_exact(&mut b)
+                .map_err(|e| eof_to_msg(e, "npy header"))?;
+            prefix.extend_from_slice(&b);
+            u16::from_le_bytes(b) as usize
+        }
+        2 | 3 => {
+            let mut b = [0u8; 4];
+            r.read_exact(&mut b)
+                .map_err(|e| eof_to_msg(e, "npy header"))?;
+            prefix.extend_from_slice(&b);
+            u32::from_le_bytes(b) as usize
+        }
+        v => return Err(format!("unsupported .npy format version {v}.{}", pre[7])),
+    };
+    if hlen > MAX_HEADER {
+        return Err(format!("npy header of {hlen} bytes is implausibly large"));
+    }
+    let mut text = vec![0u8; hlen];
+    r.read_exact(&mut text)
+        .map_err(|e| eof_to_msg(e, "npy header"))?;
+    let info = parse_header_text(&text)?;
+    let size = float_size(&info.descr)?;
+    let n = info
+        .shape
+        .iter()
+        .try_fold(1u64, |a, &d| a.checked_mul(d))
+        .filter(|&n| n.checked_mul(size as u64).is_some() && usize::try_from(n).is_ok())
+        .ok_or_else(|| format!("the array shape {:?} is too large", info.shape))?;
+    let shape: Vec<usize> = info.shape.iter().map(|&d| d as usize).collect();
+    prefix.extend_from_slice(&text);
+    let data_bytes = max_bytes.saturating_sub(prefix.len() as u64);
+    if n.saturating_mul(size as u64) > data_bytes {
+        return Err(format!(
+            "truncated data: shape {} needs {} bytes of data but at most {data_bytes} are present",
+            shape_str(&shape),
+            n * size as u64
+        ));
+    }
+    let npy = npyz::NpyFile::new(Cursor::new(prefix).chain(r))
+        .map_err(|e| format!("invalid npy header: {e}"))?;
+    if npy.shape() != info.shape.as_slice() {
+        return Err("inconsistent npy header".to_string());
+    }
+    let cap = (n as usize).min(MAX_PREALLOC);
+    let mut data = Vec::with_capacity(cap);
+    let truncated = |k: usize, e: std::io::Error| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            format!("truncated data: the header announces {n} values but the data ends after {k}")
+        } else {
+            format!("cannot read value {k}: {e}")
+        }
+    };
+    if size == 4 {
+        let it = npy
+            .data::<f32>()
+            .map_err(|e| format!("unsupported dtype '{}': {e}", info.descr))?;
+        for v in it {
+            data.push(v.map_err(|e| truncated(data.len(), e))? as f64);
+        }
+    } else {
+        let it = npy
+            .data::<f64>()
+            .map_err(|e| format!("unsupported dtype '{}': {e}", info.descr))?;
+        for v in it {
+            data.push(v.map_err(|e| truncated(data.len(), e))?);
+        }
+    }
+    if info.fortran && shape.len() > 1 {
+        data = fortran_to_c(&data, &shape);
+    }
+    Ok(NpyArray {
+        shape,
+        data,
+        was_f32: size == 4,
+    })
+}
+
+/// Reorders values stored in Fortran order (first axis fastest) into C order.
+fn fortran_to_c(data: &[f64], shape: &[usize]) -> Vec<f64> {
+    let rank = shape.len();
+    // Fortran strides.
+    let mut fstride = vec![1usize; rank];
+    for a in 1..rank {
+        fstride[a] = fstride[a - 1] * shape[a - 1];
+    }
+    let mut out = Vec::with_capacity(data.len());
+    let mut idx = vec![0usize; rank];
+    for _ in 0..data.len() {
+        let off: usize = idx.iter().zip(&fstride).map(|(i, s)| i * s).sum();
+        out.push(data[off]);
+        // Increment the C-order multi-index (last axis fastest).
+        for a in (0..rank).rev() {
+            idx[a] += 1;
+            if idx[a] < shape[a] {
+                break;
+            }
+            idx[a] = 0;
+        }
+    }
+    out
+}
+
+/// Parses a `.npy` file already in memory (float32/float64, any rank, C order result);
+/// errors are plain messages.
+pub fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
+    read_array(bytes, bytes.len() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn npy_bytes(header: &str, data: &[u8]) -> Vec<u8> {
+        let mut h = header.to_string();
+        while (10 + h.len() + 1) % 64 != 0 {
+            h.push(' ');
+        }
+        h.push('\n');
+        let mut b = b"\x93NUMPY\x01\x00".to_vec();
+        b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+        b.extend_from_slice(h.as_bytes());
+        b.extend_from_slice(data);
+        b
+    }
+
+    #[test]
+    fn header_parser() {
+        let h =
+            parse_header_text(b"{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3L), }   \n")
+                .unwrap();
+        assert_eq!(h.shape, vec![2, 3]);
+        assert!(!h.fortran);
+        assert!(parse_header_text(b"{'descr': '<f8', 'fortran_order': False}").is_err());
+        assert!(
+            parse_header_text(
+                b"{'descr': '<f8', 'fortran_order': False, 'shape': ((((((1,),),),),),)}"
+            )
+            .is_err()
+        );
+        assert!(
+            parse_header_text(
+                b"{'descr': '<f8', 'fortran_order': False, 'shape': (99999999999999999999999,)}"
+            )
+            .is_err()
+        );
+        assert!(
+            parse_header_text(b"{'descr': [('a', '<f8')], 'fortran_order': False, 'shape': ()}")
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn fortran_and_big_endian() {
+        // shape (2, 3) Fortran order: memory holds columns.
+        let vals = [0.0f64, 3.0, 1.0, 4.0, 2.0, 5.0];
+        let mut d = Vec::new();
+        for v in vals {
+            d.extend_from_slice(&v.to_be_bytes());
+        }
+        let b = npy_bytes(
+            "{'descr': '>f8', 'fortran_order': True, 'shape': (2, 3), }",
+            &d,
+        );
+        let a = parse(&b).unwrap();
+        assert_eq!(a.shape, vec![2, 3]);
+        assert_eq!(a.data, vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0]);
+    }
+
+    #[test]
+    fn rejects_bad_arrays() {
+        let b = npy_bytes(
+            "{'descr': '<i8', 'fortran_order': False, 'shape': (1,), }",
+            &[0; 8],
+        );
+        assert!(parse(&b).unwrap_err().contains("dtype"));
+        let b = npy_bytes(
+            "{'descr': '<f8', 'fortran_order': False, 'shape': (2,), }",
+            &[0; 12],
+        );
+        assert!(parse(&b).unwrap_err().contains("truncated"));
+        let b = npy_bytes(
+            "{'descr': '<f8', 'fortran_order': False, 'shape': (4294967296, 4294967296, 4294967296), }",
+            &[],
+        );
+        assert!(parse(&b).is_err());
+        assert!(parse(b"\x93NUMPY").is_err());
+        assert!(parse(b"garbage garbage garbage").is_err());
+    }
+}

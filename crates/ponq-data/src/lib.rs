@@ -1,4 +1,21 @@
 //! # ponq-data
 //!
-//! Meshes to training shapes: normalisation, exact SDF grids, surface samples, datasets.
-//! Not implemented yet (see the issue "ponq-data").
+//! From meshes to PoNQ inputs: [`normalize`] (the `[-1,1]` convention and its inverse),
+//! [`sampling`] (surface samples, and boundary samples for open surfaces), and [`fit`], the
+//! optimisation-based PoNQ of the paper (points fitted to a sampled mesh with Adam on the
+//! Chamfer distance, then normals and quadrics per Voronoi cell).
+//!
+//! ```no_run
+//! use ponq_data::fit::{FitOptions, fit_mesh};
+//! let mesh = ponq_mesh::io::read_mesh("part.obj")?;
+//! let fitted = fit_mesh(&mesh, &FitOptions { grid: 32, ..Default::default() }, |_| {})?;
+//! println!("{} points", fitted.ponq.len());
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+
+pub mod error;
+pub mod fit;
+pub mod normalize;
+pub mod sampling;
+
+pub use error::{DataError, Result};

@@ -131,6 +131,18 @@ impl TetComplex {
         b
     }
 
+    /// Volume of tet `t` (positive).
+    pub fn volume(&self, t: u32) -> f64 {
+        let [a, b, c, d] = self.dt.tets[t as usize].map(|v| *self.pos(v));
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let w = [d[0] - a[0], d[1] - a[1], d[2] - a[2]];
+        (u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
+            + u[2] * (v[0] * w[1] - v[1] * w[0]))
+            .abs()
+            / 6.0
+    }
+
     /// Size of tet `t`: the mean squared distance of its vertices to its barycentre.
     pub fn size(&self, t: u32) -> f64 {
         let b = self.barycenter(t);

@@ -1,4 +1,4 @@
 //! # ponq-train
 //!
-//! Training loop, losses and the training command-line programs. Not implemented yet (see the
-//! issue "ponq-model + ponq-train").
+//! The command-line programs that evaluate (and, with the issue "ponq-model + ponq-train",
+//! train and run) PoNQ. Training is not implemented yet: this crate holds `ponq-eval` for now.

@@ -216,7 +216,9 @@ pub fn fit_mesh(mesh: &TriMesh, opts: &FitOptions, progress: impl FnMut(usize)) 
         return Err(DataError::Invalid("the mesh has no area to sample".into()));
     }
     if opts.open.is_some() {
-        // Linear density matching the surface density: about sqrt(n / area) per unit length.
+        // As many boundary samples per boundary cell as surface samples in a cell (density
+        // n / area times the cell size per unit length): the rotated copies then make the
+        // quadrics of boundary points clearly anisotropic (lambda2 / lambda1 near 1/2 or more).
         let area: f64 = (0..m.faces.len())
             .map(|f| {
                 let c = ponq_mesh::sampling::face_cross(&m, f);
@@ -230,7 +232,8 @@ pub fn fit_mesh(mesh: &TriMesh, opts: &FitOptions, progress: impl FnMut(usize)) 
                 ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
             })
             .sum();
-        let nb = ((n as f64 / area.max(1e-12)).sqrt() * length).round() as usize;
+        let cell = 2.0 / opts.grid as f64;
+        let nb = (n as f64 / area.max(1e-12) * cell * length).round() as usize;
         let b = sample_boundary(&m, nb, opts.seed.wrapping_add(17));
         s.points.extend(b.points);
         s.normals.extend(b.normals);

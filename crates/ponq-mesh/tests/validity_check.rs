@@ -1,0 +1,553 @@
+//! Tests of `ponq_mesh::validity`: topology defects on small built meshes, exact
+//! triangle/triangle intersection cases, and property tests of the exact test.
+
+use std::collections::HashMap;
+
+use ponq_mesh::TriMesh;
+use ponq_mesh::validity::{
+    ValidityReport, check, check_topology, faces_intersect, intersecting_face_pairs,
+    triangles_intersect,
+};
+use proptest::prelude::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+// ----- mesh builders -----
+
+fn tetrahedron() -> TriMesh {
+    TriMesh::new(
+        vec![[0., 0., 0.], [1., 0., 0.], [0., 1., 0.], [0., 0., 1.]],
+        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+    )
+    .unwrap()
+}
+
+fn octahedron() -> TriMesh {
+    let vertices = vec![
+        [1., 0., 0.],
+        [-1., 0., 0.],
+        [0., 1., 0.],
+        [0., -1., 0.],
+        [0., 0., 1.],
+        [0., 0., -1.],
+    ];
+    let mut faces = Vec::new();
+    for sx in [0u32, 1] {
+        for sy in [0u32, 1] {
+            for sz in [0u32, 1] {
+                let (x, y, z) = (sx, 2 + sy, 4 + sz);
+                // Outward iff the octant has an even number of negative signs.
+                if (sx + sy + sz) % 2 == 0 {
+                    faces.push([x, y, z]);
+                } else {
+                    faces.push([x, z, y]);
+                }
+            }
+        }
+    }
+    TriMesh::new(vertices, faces).unwrap()
+}
+
+/// Axis-aligned cube `[origin, origin + size]`, each face an `n x n` grid of quads split in
+/// two triangles, shared vertices, outward orientation.
+fn cube(n: usize, origin: [f64; 3], size: f64) -> TriMesh {
+    let mut index: HashMap<[usize; 3], u32> = HashMap::new();
+    let mut vertices = Vec::new();
+    let mut vid = |g: [usize; 3]| -> u32 {
+        *index.entry(g).or_insert_with(|| {
+            vertices.push(std::array::from_fn(|k| {
+                origin[k] + size * g[k] as f64 / n as f64
+            }));
+            (vertices.len() - 1) as u32
+        })
+    };
+    let mut faces = Vec::new();
+    for axis in 0..3 {
+        for side in [0, n] {
+            // (u, v) with u x v = outward normal.
+            let (mut u, mut v) = ((axis + 1) % 3, (axis + 2) % 3);
+            if side == 0 {
+                std::mem::swap(&mut u, &mut v);
+            }
+            for i in 0..n {
+                for j in 0..n {
+                    let corner = |di: usize, dj: usize| {
+                        let mut g = [0; 3];
+                        g[axis] = side;
+                        g[u] = i + di;
+                        g[v] = j + dj;
+                        g
+                    };
+                    let (c00, c10, c11, c01) = (
+                        vid(corner(0, 0)),
+                        vid(corner(1, 0)),
+                        vid(corner(1, 1)),
+                        vid(corner(0, 1)),
+                    );
+                    faces.push([c00, c10, c11]);
+                    faces.push([c00, c11, c01]);
+                }
+            }
+        }
+    }
+    TriMesh::new(vertices, faces).unwrap()
+}
+
+/// Disjoint union; with `merge`, vertices of `b` at exactly the position of a vertex of `a`
+/// are replaced by that vertex.
+fn union(a: &TriMesh, b: &TriMesh, merge: bool) -> TriMesh {
+    let mut vertices = a.vertices.clone();
+    let mut faces = a.faces.clone();
+    let map: Vec<u32> = b
+        .vertices
+        .iter()
+        .map(|p| {
+            if merge {
+                if let Some(i) = a.vertices.iter().position(|q| q == p) {
+                    return i as u32;
+                }
+            }
+            vertices.push(*p);
+            (vertices.len() - 1) as u32
+        })
+        .collect();
+    faces.extend(b.faces.iter().map(|f| f.map(|v| map[v as usize])));
+    TriMesh::new(vertices, faces).unwrap()
+}
+
+fn assert_valid(m: &TriMesh, what: &str) -> ValidityReport {
+    let r = check(m);
+    assert!(r.is_valid(), "{what}: {r}");
+    assert!(r.is_watertight());
+    assert!(r.closed && r.oriented && r.manifold, "{what}: {r:?}");
+    assert_eq!(
+        r.to_string(),
+        "valid (closed, oriented, manifold, no self-intersection)"
+    );
+    r
+}
+
+// ----- meshes -----
+
+#[test]
+fn valid_closed_meshes() {
+    assert_valid(&tetrahedron(), "tetrahedron");
+    assert_valid(&octahedron(), "octahedron");
+    assert_valid(&cube(1, [0.; 3], 1.0), "cube 1");
+    let r = assert_valid(&cube(6, [-0.3, 0.1, 0.7], 2.5), "cube 6");
+    assert_eq!(r.degenerate_faces, 0);
+    assert_eq!(r.coincident_vertices, 0);
+    // Non-dyadic coordinates: still exact.
+    assert_valid(&cube(5, [0.1, 0.2, 0.3], 0.7), "cube 5 non-dyadic");
+    let t = check_topology(&cube(3, [0.; 3], 1.0));
+    assert!(t.is_valid() && !t.self_intersections_checked);
+    assert!(t.to_string().contains("not checked"), "{t}");
+}
+
+#[test]
+fn empty_and_unreferenced() {
+    let r = check(&TriMesh::default());
+    assert!(r.is_valid(), "{r}");
+    let m = TriMesh::new(vec![[0.; 3], [1.; 3]], vec![]).unwrap();
+    let r = check(&m);
+    assert!(r.is_valid());
+    assert_eq!(r.unreferenced_vertices, 2);
+    assert!(r.to_string().ends_with("; 2 unreferenced vertices"), "{r}");
+    let mut t = tetrahedron();
+    t.vertices.push([5.; 3]);
+    t.vertices.push([0.; 3]); // unreferenced duplicate of vertex 0: not a coincidence defect
+    let r = check(&t);
+    assert!(r.is_valid(), "{r}");
+    assert_eq!(r.unreferenced_vertices, 2);
+    assert_eq!(r.coincident_vertices, 0);
+}
+
+#[test]
+fn flipped_face_is_not_oriented() {
+    let mut m = cube(3, [0.; 3], 1.0);
+    m.faces[7].swap(1, 2);
+    let r = check(&m);
+    assert!(r.closed && r.manifold && !r.oriented, "{r:?}");
+    assert!(!r.is_valid());
+    assert_eq!(r.self_intersections, 0);
+    assert_eq!(r.to_string(), "invalid: not oriented");
+}
+
+#[test]
+fn removed_face_gives_three_boundary_edges() {
+    let mut m = octahedron();
+    m.faces.remove(3);
+    let r = check(&m);
+    assert!(!r.closed && !r.oriented && !r.manifold);
+    assert_eq!(r.boundary_edges, 3);
+    assert_eq!(r.nonmanifold_edges, 0);
+    assert_eq!(r.nonmanifold_vertices, 0);
+    assert_eq!(r.to_string(), "invalid: 3 boundary edges");
+}
+
+#[test]
+fn cubes_glued_at_an_edge() {
+    let a = cube(1, [0., 0., 0.], 1.0);
+    let b = cube(1, [1., 1., 0.], 1.0);
+    let m = union(&a, &b, true);
+    assert_eq!(m.vertices.len(), 14);
+    let r = check(&m);
+    assert_eq!(r.nonmanifold_edges, 1, "{r:?}");
+    assert_eq!(r.boundary_edges, 0);
+    assert!(!r.closed && !r.manifold && !r.is_valid());
+    assert_eq!(r.self_intersections, 0, "{r:?}");
+    assert_eq!(r.coincident_vertices, 0);
+    assert!(r.to_string().contains("1 non-manifold edge"), "{r}");
+}
+
+#[test]
+fn tetrahedra_sharing_a_vertex() {
+    let a = tetrahedron();
+    let mut b = tetrahedron();
+    for p in &mut b.vertices {
+        *p = p.map(|x| -x);
+    }
+    for f in &mut b.faces {
+        f.swap(1, 2); // the reflection flipped the orientation
+    }
+    let m = union(&a, &b, true);
+    assert_eq!(m.vertices.len(), 7);
+    let r = check(&m);
+    assert!(r.closed && r.oriented && !r.manifold, "{r:?}");
+    assert_eq!(r.nonmanifold_vertices, 1);
+    assert_eq!(r.nonmanifold_edges, 0);
+    assert_eq!(r.self_intersections, 0);
+    assert_eq!(r.to_string(), "invalid: 1 non-manifold vertex");
+}
+
+#[test]
+fn interpenetrating_cubes() {
+    let a = cube(2, [0., 0., 0.], 1.0);
+    let b = cube(2, [0.5, 0.3, 0.2], 1.0);
+    let m = union(&a, &b, false);
+    let r = check(&m);
+    assert!(r.closed && r.oriented && r.manifold, "{r:?}");
+    assert_eq!(r.coincident_vertices, 0);
+    assert!(r.self_intersections > 0);
+    assert!(!r.is_valid());
+    let pairs = intersecting_face_pairs(&m);
+    assert_eq!(pairs.len(), r.self_intersections);
+    let na = a.faces.len();
+    for &(i, j) in &pairs {
+        assert!(
+            i < na && j >= na,
+            "only faces of different cubes cross: {i} {j}"
+        );
+        assert!(faces_intersect(&m, i, j) && faces_intersect(&m, j, i));
+    }
+    assert!(check_topology(&m).is_valid());
+}
+
+#[test]
+fn cubes_touching_on_a_face_with_separate_vertices() {
+    let a = cube(1, [0., 0., 0.], 1.0);
+    let b = cube(1, [1., 0., 0.], 1.0);
+    let m = union(&a, &b, false);
+    let r = check(&m);
+    assert!(r.closed && r.oriented && r.manifold);
+    assert_eq!(r.coincident_vertices, 8, "{r:?}");
+    assert!(r.self_intersections > 0);
+    assert!(!r.is_valid());
+    let s = r.to_string();
+    assert!(
+        s.contains("8 coincident vertices") && s.contains("self-intersecting"),
+        "{s}"
+    );
+
+    // Separated by one ulp-scale gap (~1.1e-15): valid.
+    let b = cube(1, [1.0 + 1e-15, 0., 0.], 1.0);
+    assert!(b.vertices.iter().all(|p| p[0] > 1.0));
+    assert_valid(&union(&a, &b, false), "near miss");
+}
+
+#[test]
+fn degenerate_and_duplicate_faces() {
+    let mut m = tetrahedron();
+    m.faces.push(m.faces[0]);
+    let r = check(&m);
+    assert_eq!(r.self_intersections, 1, "{r:?}");
+    assert_eq!(r.nonmanifold_edges, 3);
+
+    let mut m = tetrahedron();
+    m.faces.push([0, 0, 1]);
+    let r = check(&m);
+    assert_eq!(r.degenerate_faces, 1);
+    assert!(!r.is_valid());
+
+    // Exactly collinear corners (all three axis projections vanish) vs an almost collinear
+    // triangle (last coordinate one ulp away).
+    let m = TriMesh::new(
+        vec![
+            [1., 2., 3.],
+            [2., 4., 6.],
+            [3., 6., 9.],
+            [3., 6., 9.000000000000002],
+        ],
+        vec![[0, 1, 2], [0, 1, 3]],
+    )
+    .unwrap();
+    let r = check(&m);
+    assert_eq!(r.degenerate_faces, 1, "{r:?}");
+    // Coincident referenced vertices of a closed mesh.
+    let mut t = tetrahedron();
+    t.vertices.push([0.; 3]);
+    t.faces[0][0] = 4; // face [4, 2, 1] uses a copy of vertex 0
+    let r = check(&t);
+    assert_eq!(r.coincident_vertices, 2, "{r:?}");
+    assert!(!r.is_valid());
+}
+
+// ----- exact triangle / triangle cases -----
+
+fn t(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [[f64; 3]; 3] {
+    [a, b, c]
+}
+
+const BASE: [[f64; 3]; 3] = [[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]];
+
+#[test]
+fn touching_at_a_single_point() {
+    // Vertex on the interior of the other triangle.
+    let up = t([0.25, 0.25, 0.], [0.25, 0.25, 1.], [1., 1., 1.]);
+    assert!(triangles_intersect(&BASE, &up));
+    let lifted = t([0.25, 0.25, 1e-15], [0.25, 0.25, 1.], [1., 1., 1.]);
+    assert!(!triangles_intersect(&BASE, &lifted));
+    let sunk = t([0.25, 0.25, -1e-15], [0.25, 0.25, 1.], [1., 1., 1.]);
+    assert!(triangles_intersect(&BASE, &sunk), "crossing");
+    // Vertex on an edge (hypotenuse).
+    let on_edge = t([0.5, 0.5, 0.], [0.5, 0.5, 1.], [2., 2., 1.]);
+    assert!(triangles_intersect(&BASE, &on_edge));
+    let off_edge = t([0.5, 0.5 + 1e-15, 0.], [0.5, 0.5, 1.], [2., 2., 1.]);
+    assert!(!triangles_intersect(&BASE, &off_edge));
+    // Edge touching edge at one point, transverse planes.
+    let e = t([0.5, -1., 1.], [0.5, 1., -1.], [0.5, -3., -3.]);
+    assert!(triangles_intersect(&BASE, &e));
+    let e_off = t(
+        [0.5, -1. - 1e-15, 1.],
+        [0.5, 1. - 1e-15, -1.],
+        [0.5, -3., -3.],
+    );
+    assert!(!triangles_intersect(&BASE, &e_off));
+    // Vertex on vertex.
+    let vv = t([1., 0., 0.], [2., 0., 1.], [2., 1., 1.]);
+    assert!(triangles_intersect(&BASE, &vv));
+    // Non-dyadic coordinates: a point exactly on an axis-parallel edge.
+    let tn = t([0.1, 0.2, 0.3], [0.1, 0.2, 0.7], [0.9, 0.4, 0.5]);
+    let pn = t([0.1, 0.2, 0.5], [-0.3, 0.3, 0.1], [-0.2, -0.6, 0.9]);
+    assert!(triangles_intersect(&tn, &pn));
+    let pn_off = t([0.1, 0.2 - 1e-15, 0.5], [-0.3, 0.3, 0.1], [-0.2, -0.6, 0.9]);
+    assert!(!triangles_intersect(&tn, &pn_off));
+}
+
+#[test]
+fn coplanar_cases() {
+    let shifted = t([0.2, 0.2, 0.], [1.2, 0.2, 0.], [0.2, 1.2, 0.]);
+    assert!(triangles_intersect(&BASE, &shifted), "overlap");
+    let inside = t([0.1, 0.1, 0.], [0.3, 0.1, 0.], [0.1, 0.3, 0.]);
+    assert!(triangles_intersect(&BASE, &inside), "containment");
+    assert!(triangles_intersect(&inside, &BASE));
+    let star = t([0.5, -0.2, 0.], [0.5, 0.8, 0.], [-0.5, 0.3, 0.]);
+    assert!(
+        triangles_intersect(&BASE, &star),
+        "edges crossing, no vertex inside"
+    );
+    let edge_touch = t([1., 0., 0.], [0., 1., 0.], [1., 1., 0.]);
+    assert!(
+        triangles_intersect(&BASE, &edge_touch),
+        "shared edge geometrically"
+    );
+    let gap = t([0.5 + 1e-15, 0.5, 0.], [1., 1., 0.], [1.5, 0.5, 0.]);
+    assert!(!triangles_intersect(&BASE, &gap), "1e-15 gap");
+    let touch = t([0.5, 0.5, 0.], [1., 1., 0.], [1.5, 0.5, 0.]);
+    assert!(triangles_intersect(&BASE, &touch));
+    // Coplanar in a vertical plane (z projection degenerate).
+    let va = t([0., 0., 0.], [1., 1., 0.], [0., 0., 1.]);
+    let vb = t([0.5, 0.5, 0.5], [2., 2., 0.], [2., 2., 2.]);
+    let vc = t([0.6, 0.6, 0.5], [2., 2., 0.], [2., 2., 2.]);
+    assert!(triangles_intersect(&va, &vb));
+    assert!(!triangles_intersect(&va, &vc));
+    // Parallel planes 1e-15 apart.
+    let par = t([0., 0., 1e-15], [1., 0., 1e-15], [0., 1., 1e-15]);
+    assert!(!triangles_intersect(&BASE, &par));
+}
+
+// ----- properties -----
+
+fn permutations(tr: &[[f64; 3]; 3]) -> [[[f64; 3]; 3]; 6] {
+    let [a, b, c] = *tr;
+    [
+        [a, b, c],
+        [b, c, a],
+        [c, a, b],
+        [a, c, b],
+        [c, b, a],
+        [b, a, c],
+    ]
+}
+
+fn assert_symmetric_invariant(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
+    let r = triangles_intersect(a, b);
+    for pa in permutations(a) {
+        for pb in permutations(b) {
+            assert_eq!(triangles_intersect(&pa, &pb), r, "{a:?} {b:?}");
+            assert_eq!(triangles_intersect(&pb, &pa), r, "{a:?} {b:?}");
+        }
+    }
+    r
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Floating-point separating-axis reference: `Some(false)` when some axis separates the
+/// triangles by more than `margin`, `Some(true)` when they overlap by more than `margin` on
+/// every candidate axis (face normals, edge x edge, normal x edge: complete for triangles),
+/// `None` when undecided.
+fn sat_reference(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3], margin: f64) -> Option<bool> {
+    let ea: [[f64; 3]; 3] = std::array::from_fn(|k| sub(a[(k + 1) % 3], a[k]));
+    let eb: [[f64; 3]; 3] = std::array::from_fn(|k| sub(b[(k + 1) % 3], b[k]));
+    let (na, nb) = (cross(ea[0], ea[1]), cross(eb[0], eb[1]));
+    let mut axes = vec![na, nb];
+    for (&a_edge, &b_edge) in ea.iter().zip(&eb) {
+        for &other in &eb {
+            axes.push(cross(a_edge, other));
+        }
+        axes.push(cross(na, a_edge));
+        axes.push(cross(nb, b_edge));
+    }
+    let mut all_overlap = true;
+    for ax in axes {
+        let len = dot(ax, ax).sqrt();
+        if len < 1e-6 {
+            // Nearly parallel edges: the axis is unreliable, give up.
+            return None;
+        }
+        let u = ax.map(|x| x / len);
+        let pa = a.map(|p| dot(p, u));
+        let pb = b.map(|p| dot(p, u));
+        let (amin, amax) = (
+            pa.iter().copied().fold(f64::INFINITY, f64::min),
+            pa.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        let (bmin, bmax) = (
+            pb.iter().copied().fold(f64::INFINITY, f64::min),
+            pb.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        let gap = (bmin - amax).max(amin - bmax);
+        if gap > margin {
+            return Some(false);
+        }
+        if gap > -margin {
+            all_overlap = false;
+        }
+    }
+    all_overlap.then_some(true)
+}
+
+fn random_triangle(rng: &mut ChaCha8Rng, center: [f64; 3], r: f64) -> [[f64; 3]; 3] {
+    std::array::from_fn(|_| std::array::from_fn(|k| center[k] + rng.random_range(-r..r)))
+}
+
+#[test]
+fn agrees_with_float_reference_on_clear_cases() {
+    let mut rng = ChaCha8Rng::seed_from_u64(42);
+    let (mut yes, mut no) = (0, 0);
+    for _ in 0..20_000 {
+        let a = random_triangle(&mut rng, [0.; 3], 1.0);
+        let c: [f64; 3] = std::array::from_fn(|_| rng.random_range(-0.6..0.6));
+        let b = random_triangle(&mut rng, c, 1.0);
+        if let Some(want) = sat_reference(&a, &b, 1e-6) {
+            assert_eq!(triangles_intersect(&a, &b), want, "{a:?} {b:?}");
+            assert_eq!(triangles_intersect(&b, &a), want);
+            if want { yes += 1 } else { no += 1 }
+        }
+    }
+    assert!(yes > 2000 && no > 2000, "{yes} {no}");
+
+    // Constructed crossings: an edge of `b` pierces `a` deep inside.
+    for _ in 0..2000 {
+        let a = random_triangle(&mut rng, [0.; 3], 1.0);
+        let w: [f64; 3] = std::array::from_fn(|_| rng.random_range(0.2..1.0));
+        let s = w[0] + w[1] + w[2];
+        let inner: [f64; 3] =
+            std::array::from_fn(|k| (w[0] * a[0][k] + w[1] * a[1][k] + w[2] * a[2][k]) / s);
+        let n = cross(sub(a[1], a[0]), sub(a[2], a[0]));
+        let nl = dot(n, n).sqrt();
+        if nl < 1e-3 {
+            continue;
+        }
+        let (up, down) = (rng.random_range(0.1..1.0), rng.random_range(0.1..1.0));
+        let d: [f64; 3] = std::array::from_fn(|k| n[k] / nl);
+        let b = [
+            std::array::from_fn(|k| inner[k] + up * d[k]),
+            std::array::from_fn(|k| inner[k] - down * d[k]),
+            std::array::from_fn(|k| inner[k] + rng.random_range(-1.0..1.0)),
+        ];
+        assert!(triangles_intersect(&a, &b), "{a:?} {b:?}");
+        assert!(triangles_intersect(&b, &a));
+        // The same triangle moved far along the normal is clearly disjoint.
+        let far = b.map(|p| std::array::from_fn(|k| p[k] + 5.0 * n[k] / nl));
+        assert!(!triangles_intersect(&a, &far));
+    }
+}
+
+fn grid_triangle() -> impl Strategy<Value = [[f64; 3]; 3]> {
+    // Small integer grid: many exactly touching, coplanar and degenerate configurations.
+    prop::array::uniform3(prop::array::uniform3(
+        (-2i32..=2).prop_map(|x| x as f64 * 0.5),
+    ))
+}
+
+fn float_triangle() -> impl Strategy<Value = [[f64; 3]; 3]> {
+    prop::array::uniform3(prop::array::uniform3(-1.0f64..1.0))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    #[test]
+    fn symmetric_and_permutation_invariant_on_grid(a in grid_triangle(), b in grid_triangle()) {
+        assert_symmetric_invariant(&a, &b);
+    }
+
+    #[test]
+    fn symmetric_and_permutation_invariant_random(a in float_triangle(), b in float_triangle()) {
+        let r = assert_symmetric_invariant(&a, &b);
+        if let Some(want) = sat_reference(&a, &b, 1e-9) {
+            prop_assert_eq!(r, want);
+        }
+    }
+
+    #[test]
+    fn translation_by_exact_offsets(a in grid_triangle(), b in grid_triangle(), off in prop::array::uniform3((-8i32..8).prop_map(|x| x as f64))) {
+        // Integer translations of half-integer coordinates are exact: same answer.
+        let m = |t: [[f64; 3]; 3]| t.map(|p| std::array::from_fn(|k| p[k] + off[k]));
+        prop_assert_eq!(triangles_intersect(&a, &b), triangles_intersect(&m(a), &m(b)));
+    }
+
+    #[test]
+    fn mesh_check_is_invariant_under_face_rotation(rot in prop::collection::vec(0usize..3, 72), n in 1usize..4) {
+        let mut m = cube(n, [0.1, -0.2, 0.3], 1.3);
+        let base = check(&m);
+        for (f, r) in m.faces.iter_mut().zip(rot.iter().cycle()) {
+            f.rotate_left(*r);
+        }
+        prop_assert_eq!(check(&m), base);
+    }
+}

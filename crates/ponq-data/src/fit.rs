@@ -14,8 +14,8 @@ use ponq_mesh::mesher::{MeshingOptions, MeshingOutput, mesh_ponq};
 use ponq_mesh::nn::PointIndex;
 use ponq_mesh::open_surface::DEFAULT_OPEN_THRESHOLD;
 use ponq_mesh::{Ponq, TriMesh};
-use rand::seq::index::sample;
 use rand::SeedableRng;
+use rand::seq::index::sample;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{DataError, Result};
@@ -140,7 +140,11 @@ pub fn optimise_points(
     };
     for it in 0..iterations {
         bs.clear();
-        bs.extend(sample(&mut rng, samples.len(), batch).iter().map(|i| samples[i]));
+        bs.extend(
+            sample(&mut rng, samples.len(), batch)
+                .iter()
+                .map(|i| samples[i]),
+        );
         let Some(pi) = PointIndex::new(points) else {
             break;
         };
@@ -182,7 +186,11 @@ pub fn optimise_points(
 pub fn ponq_from_voronoi(points: &[[f64; 3]], s: &SurfaceSamples) -> Result<Ponq> {
     let idx = PointIndex::new(points)
         .ok_or_else(|| DataError::Invalid("no point to build the PoNQ from".into()))?;
-    let nearest: Vec<u32> = idx.nearest_many(&s.points).into_iter().map(|x| x.0).collect();
+    let nearest: Vec<u32> = idx
+        .nearest_many(&s.points)
+        .into_iter()
+        .map(|x| x.0)
+        .collect();
     let (mut ponq, ids) = Ponq::from_clusters(&s.points, &s.normals, &nearest, points.len())?;
     // Keep the fitted positions as the points (v* is solved around them).
     ponq.points = ids.iter().map(|&i| points[i as usize]).collect();

@@ -25,7 +25,8 @@ impl Normalization {
         let (lo, hi) = mesh
             .bounding_box()
             .ok_or_else(|| DataError::Invalid("the mesh has no vertex".into()))?;
-        let d = ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();
+        let d =
+            ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();
         if !(d > 0.0 && d.is_finite()) {
             return Err(DataError::Invalid(format!(
                 "the mesh's bounding box {lo:?}..{hi:?} has no extent or is not finite"

@@ -112,7 +112,11 @@ fn open_surface_fit_keeps_the_hole_open() {
         .faces
         .iter()
         .filter(|t| {
-            let z = t.iter().map(|&i| f.meshing.mesh.vertices[i as usize][2]).sum::<f64>() / 3.0;
+            let z = t
+                .iter()
+                .map(|&i| f.meshing.mesh.vertices[i as usize][2])
+                .sum::<f64>()
+                / 3.0;
             z > top + 0.05
         })
         .count();
@@ -135,6 +139,10 @@ fn bad_inputs_are_errors() {
         assert!(fit_mesh(&gt, &o, |_| {}).is_err());
     }
     // A single degenerate triangle has no area.
-    let flat = TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], vec![[0, 1, 2]]).unwrap();
+    let flat = TriMesh::new(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
     assert!(fit_mesh(&flat, &FitOptions::default(), |_| {}).is_err());
 }

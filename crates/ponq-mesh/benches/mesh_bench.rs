@@ -70,7 +70,12 @@ fn main() {
         "| input | points | tets | delaunay ms | tagging ms | cut ms | manifold ms | other ms | total ms | V / F | valid | check ms |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
-    for (grid, samples) in [(24usize, 60_000usize), (56, 150_000), (112, 400_000), (180, 900_000)] {
+    for (grid, samples) in [
+        (24usize, 60_000usize),
+        (56, 150_000),
+        (112, 400_000),
+        (180, 900_000),
+    ] {
         let ponq = ponq_by_grid(&shape(samples), grid);
         row(&format!("synthetic grid {grid}"), &ponq, grid as f64);
     }

@@ -165,7 +165,12 @@ impl TetComplex {
     /// Debug helper: true when every tet is positively oriented.
     pub fn all_positive(&self) -> bool {
         self.dt.tets.iter().all(|tv| {
-            orient3d(self.pos(tv[0]), self.pos(tv[1]), self.pos(tv[2]), self.pos(tv[3])) > 0
+            orient3d(
+                self.pos(tv[0]),
+                self.pos(tv[1]),
+                self.pos(tv[2]),
+                self.pos(tv[3]),
+            ) > 0
         })
     }
 }

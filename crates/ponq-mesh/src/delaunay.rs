@@ -109,7 +109,7 @@ fn brio_order(pts: &[[f64; 3]], lo: [f64; 3], hi: [f64; 3]) -> Vec<u32> {
         hilbert_index([c(0), c(1), c(2)], BITS)
     };
     let mut order: Vec<u32> = (0..pts.len() as u32).collect();
-    let mut rng = SplitMix(0x5EED_0F_D3A1);
+    let mut rng = SplitMix(0x005E_ED0F_D3A1);
     for i in (1..order.len()).rev() {
         let j = (rng.next() % (i as u64 + 1)) as usize;
         order.swap(i, j);
@@ -414,7 +414,10 @@ impl Builder {
                     self.stack.push(nb);
                 } else {
                     self.tets[nb as usize].mark = not_cav;
-                    let j = nt.n.iter().position(|&x| x == c).expect("adjacency is symmetric") as u8;
+                    let j =
+                        nt.n.iter()
+                            .position(|&x| x == c)
+                            .expect("adjacency is symmetric") as u8;
                     self.boundary.push((c, k, nb, j));
                 }
             }
@@ -519,7 +522,10 @@ impl Builder {
         let mut neighbors = Vec::with_capacity(tets.len());
         for (t, tet) in self.tets.iter().enumerate() {
             if remap[t] != NONE {
-                neighbors.push(tet.n.map(|x| if x == NONE { NONE } else { remap[x as usize] }));
+                neighbors.push(
+                    tet.n
+                        .map(|x| if x == NONE { NONE } else { remap[x as usize] }),
+                );
             }
         }
         let mut vertices = self.pos;

@@ -19,7 +19,6 @@
 //! # Ok::<(), ponq_mesh::Error>(())
 //! ```
 
-
 pub mod bvh;
 pub mod complex;
 pub mod cut;

@@ -49,7 +49,9 @@ impl Ponq {
         check_finite3("points", &points)?;
         check_finite3("normals", &normals)?;
         if let Some(i) = quadrics.iter().position(|q| {
-            q.a.iter().any(|x| !x.is_finite()) || q.b.iter().any(|x| !x.is_finite()) || !q.c.is_finite()
+            q.a.iter().any(|x| !x.is_finite())
+                || q.b.iter().any(|x| !x.is_finite())
+                || !q.c.is_finite()
         }) {
             return Err(Error::InvalidInput(format!("quadrics[{i}] is not finite")));
         }

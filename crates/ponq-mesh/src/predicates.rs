@@ -162,7 +162,7 @@ pub fn in_conflict(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32) -> bo
 fn perturbed_insphere_tie(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32) -> bool {
     // Roles 0..4 are the tet's vertices, 4 is the query point; visit in decreasing index.
     let mut roles = [(it[0], 0usize), (it[1], 1), (it[2], 2), (it[3], 3), (ie, 4)];
-    roles.sort_unstable_by(|a, b| b.0.cmp(&a.0));
+    roles.sort_unstable_by_key(|r| std::cmp::Reverse(r.0));
     for &(_, role) in &roles {
         if role == 4 {
             // The coefficient is orient3d(t) > 0 with the sign of "outside".

@@ -121,7 +121,8 @@ impl Quadric {
         let mut m = Matrix4::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.a);
         m.fixed_view_mut::<3, 1>(0, 3).copy_from(&(-self.b));
-        m.fixed_view_mut::<1, 3>(3, 0).copy_from(&(-self.b.transpose()));
+        m.fixed_view_mut::<1, 3>(3, 0)
+            .copy_from(&(-self.b.transpose()));
         m[(3, 3)] = self.c;
         m
     }
@@ -162,7 +163,11 @@ impl Quadric {
     /// A zero `A` gives 0.
     pub fn anisotropy(&self) -> f64 {
         let e = self.eigenvalues();
-        if e[0] > 0.0 { (e[1] / e[0]).max(0.0) } else { 0.0 }
+        if e[0] > 0.0 {
+            (e[1] / e[0]).max(0.0)
+        } else {
+            0.0
+        }
     }
 
     /// The QEM-optimal vertex: the minimiser of `Q` closest to `reference`, computed with the

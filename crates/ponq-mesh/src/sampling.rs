@@ -128,7 +128,12 @@ pub fn sample_edges(mesh: &TriMesh, edges: &[[u32; 2]], n: usize, seed: u64) -> 
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let lens: Vec<f64> = edges
         .iter()
-        .map(|e| norm(sub(mesh.vertices[e[1] as usize], mesh.vertices[e[0] as usize])))
+        .map(|e| {
+            norm(sub(
+                mesh.vertices[e[1] as usize],
+                mesh.vertices[e[0] as usize],
+            ))
+        })
         .collect();
     weighted_indices(&lens, n, &mut rng)
         .into_iter()

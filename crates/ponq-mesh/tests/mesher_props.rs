@@ -55,7 +55,12 @@ fn sphere_is_watertight_with_the_right_volume() {
 
 #[test]
 fn box_keeps_its_corners_sharp() {
-    let s = box_samples([-0.47, -0.41, -0.29], [0.53, 0.39, 0.31], 60_000, &mut rng(2));
+    let s = box_samples(
+        [-0.47, -0.41, -0.29],
+        [0.53, 0.39, 0.31],
+        60_000,
+        &mut rng(2),
+    );
     let ponq = ponq_by_grid(&s, 16);
     let out = mesh(&ponq, 16.0);
     assert_valid(&out, "box");
@@ -70,7 +75,9 @@ fn box_keeps_its_corners_sharp() {
                 if i & 4 == 0 { -0.29 } else { 0.31 },
             ];
             out.mesh.vertices.iter().any(|p| {
-                (p[0] - c[0]).abs() < 1e-6 && (p[1] - c[1]).abs() < 1e-6 && (p[2] - c[2]).abs() < 1e-6
+                (p[0] - c[0]).abs() < 1e-6
+                    && (p[1] - c[1]).abs() < 1e-6
+                    && (p[2] - c[2]).abs() < 1e-6
             })
         })
         .count();
@@ -90,7 +97,11 @@ fn cad_like_unions_and_thin_plates() {
         for _ in 0..3 {
             let c: [f64; 3] = std::array::from_fn(|_| r.random_range(-0.4..0.4));
             let h: [f64; 3] = std::array::from_fn(|k| {
-                if k == case % 3 { r.random_range(0.02..0.08) } else { r.random_range(0.1..0.4) }
+                if k == case % 3 {
+                    r.random_range(0.02..0.08)
+                } else {
+                    r.random_range(0.1..0.4)
+                }
             });
             let b = box_samples(
                 [c[0] - h[0], c[1] - h[1], c[2] - h[2]],
@@ -182,7 +193,10 @@ fn tiny_and_degenerate_inputs() {
         ("two", mk(vec![[0.0; 3], [0.1, 0.0, 0.0]], [0.0, 0.0, 1.0])),
         (
             "three",
-            mk(vec![[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [0.0, 0.0, 1.0]),
+            mk(
+                vec![[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]],
+                [0.0, 0.0, 1.0],
+            ),
         ),
         (
             "four",
@@ -195,7 +209,13 @@ fn tiny_and_degenerate_inputs() {
             "coplanar",
             mk(
                 (0..100)
-                    .map(|i| [(i % 10) as f64 * 0.1 - 0.5, (i / 10) as f64 * 0.1 - 0.5, 0.25])
+                    .map(|i| {
+                        [
+                            (i % 10) as f64 * 0.1 - 0.5,
+                            (i / 10) as f64 * 0.1 - 0.5,
+                            0.25,
+                        ]
+                    })
                     .collect(),
                 [0.0, 0.0, 1.0],
             ),
@@ -207,20 +227,33 @@ fn tiny_and_degenerate_inputs() {
         (
             "on the domain corners",
             mk(
-                vec![[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 0.0, 0.0]],
+                vec![
+                    [-1.0, -1.0, -1.0],
+                    [1.0, 1.0, 1.0],
+                    [1.0, -1.0, 1.0],
+                    [0.0, 0.0, 0.0],
+                ],
                 [0.0, 0.0, 1.0],
             ),
         ),
         (
             "outside the domain",
             mk(
-                vec![[3.0, 0.0, 0.0], [-2.5, 1.0, 0.0], [0.0, 4.0, -3.0], [0.5, 0.5, 0.5]],
+                vec![
+                    [3.0, 0.0, 0.0],
+                    [-2.5, 1.0, 0.0],
+                    [0.0, 4.0, -3.0],
+                    [0.5, 0.5, 0.5],
+                ],
                 [1.0, 0.0, 0.0],
             ),
         ),
         (
             "zero normals",
-            mk(sphere_samples([0.0; 3], 0.5, 200, &mut rng(9)).points, [0.0; 3]),
+            mk(
+                sphere_samples([0.0; 3], 0.5, 200, &mut rng(9)).points,
+                [0.0; 3],
+            ),
         ),
     ];
     for (name, p) in cases {

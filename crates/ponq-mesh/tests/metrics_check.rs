@@ -1,7 +1,9 @@
 //! Metrics against brute force and on meshes with known answers.
 
 use ponq_mesh::TriMesh;
-use ponq_mesh::metrics::{MetricOptions, chamfer_f1, compare, grid_frame_to_gt, unit_diagonal_transform};
+use ponq_mesh::metrics::{
+    MetricOptions, chamfer_f1, compare, grid_frame_to_gt, unit_diagonal_transform,
+};
 use ponq_mesh::sampling::{sample_edges, sample_surface, sharp_edges};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -69,7 +71,14 @@ fn brute(a: &[[f64; 3]], b: &[[f64; 3]], tau: f64) -> (f64, f64) {
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let frac = |v: &[f64]| v.iter().filter(|&&d| d < tau * tau).count() as f64 / v.len() as f64;
     let (r, p) = (frac(&ab), frac(&ba));
-    (mean(&ab) + mean(&ba), if r + p > 0.0 { 2.0 * r * p / (r + p) } else { 0.0 })
+    (
+        mean(&ab) + mean(&ba),
+        if r + p > 0.0 {
+            2.0 * r * p / (r + p)
+        } else {
+            0.0
+        },
+    )
 }
 
 #[test]
@@ -77,8 +86,12 @@ fn chamfer_and_f1_equal_brute_force() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     for case in 0..20 {
         let n = 50 + case * 20;
-        let a: Vec<[f64; 3]> = (0..n).map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5))).collect();
-        let b: Vec<[f64; 3]> = (0..n + 7).map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5))).collect();
+        let a: Vec<[f64; 3]> = (0..n)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5)))
+            .collect();
+        let b: Vec<[f64; 3]> = (0..n + 7)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5)))
+            .collect();
         let tau = 0.05 + 0.01 * case as f64;
         let (cd, f1, _) = chamfer_f1(&a, &b, tau);
         let (cd2, f12) = brute(&a, &b, tau);
@@ -97,7 +110,10 @@ fn sharp_edges_of_a_cube_and_samples_on_them() {
     assert_eq!(s.len(), 1000);
     for p in &s {
         // On a cube edge: at least two coordinates are 0 or 1.
-        let on = p.iter().filter(|&&x| x.abs() < 1e-12 || (x - 1.0).abs() < 1e-12).count();
+        let on = p
+            .iter()
+            .filter(|&&x| x.abs() < 1e-12 || (x - 1.0).abs() < 1e-12)
+            .count();
         assert!(on >= 2, "{p:?}");
     }
     assert!(sharp_edges(&octahedron(1.0), 100.0).is_empty());
@@ -109,13 +125,23 @@ fn surface_samples_are_on_the_surface_and_seeded() {
     let s = sample_surface(&c, 5000, 9);
     assert_eq!(s.points.len(), 5000);
     for (p, n) in s.points.iter().zip(&s.normals) {
-        let on = p.iter().filter(|&&x| x.abs() < 1e-12 || (x - 1.0).abs() < 1e-12).count();
+        let on = p
+            .iter()
+            .filter(|&&x| x.abs() < 1e-12 || (x - 1.0).abs() < 1e-12)
+            .count();
         assert!(on >= 1);
         assert!((n[0] * n[0] + n[1] * n[1] + n[2] * n[2] - 1.0).abs() < 1e-12);
     }
-    assert_eq!(sample_surface(&c, 100, 9).points, sample_surface(&c, 100, 9).points);
+    assert_eq!(
+        sample_surface(&c, 100, 9).points,
+        sample_surface(&c, 100, 9).points
+    );
     // Area weighting: each of the 6 faces gets about 1/6 of the samples.
-    let top = s.points.iter().filter(|p| (p[2] - 1.0).abs() < 1e-12).count();
+    let top = s
+        .points
+        .iter()
+        .filter(|p| (p[2] - 1.0).abs() < 1e-12)
+        .count();
     assert!((top as f64 / 5000.0 - 1.0 / 6.0).abs() < 0.03);
 }
 
@@ -138,10 +164,16 @@ fn identical_meshes_score_well_and_a_shift_scores_worse() {
     for d in [0.01, 0.03, 0.1] {
         let moved = gt.clone().translated([d, d, d]);
         let m = compare(&moved, &gt, &opts);
-        assert!(m.cd_x1e5 > last.cd_x1e5 && m.ecd_x1e2 > last.ecd_x1e2, "{m:?} vs {last:?}");
+        assert!(
+            m.cd_x1e5 > last.cd_x1e5 && m.ecd_x1e2 > last.ecd_x1e2,
+            "{m:?} vs {last:?}"
+        );
         last = m;
     }
-    assert!(last.f1 < 0.5 * same.f1 && last.ef1 < 0.5 * same.ef1, "{last:?}");
+    assert!(
+        last.f1 < 0.5 * same.f1 && last.ef1 < 0.5 * same.ef1,
+        "{last:?}"
+    );
     // No sharp edges on either side: ECD 0, EF1 1 (the single origin point convention).
     let smooth = TriMesh::default();
     let e = compare(&smooth, &gt, &opts);

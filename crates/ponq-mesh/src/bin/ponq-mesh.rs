@@ -121,7 +121,12 @@ fn run(args: &Args) -> Result<bool> {
         }
         println!(
             "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets",
-            s.tets, s.tagged[0], s.tagged[1], s.tagged[2], s.cut.nodes, s.cut.edges,
+            s.tets,
+            s.tagged[0],
+            s.tagged[1],
+            s.tagged[2],
+            s.cut.nodes,
+            s.cut.edges,
             s.manifold.flipped_tets
         );
         println!(

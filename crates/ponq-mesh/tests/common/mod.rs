@@ -55,7 +55,8 @@ pub fn sphere_samples(c: [f64; 3], r: f64, n: usize, rng: &mut ChaCha8Rng) -> Sa
             continue;
         }
         let u = d.map(|x| x / l);
-        s.points.push([c[0] + r * u[0], c[1] + r * u[1], c[2] + r * u[2]]);
+        s.points
+            .push([c[0] + r * u[0], c[1] + r * u[1], c[2] + r * u[2]]);
         s.normals.push(u);
     }
     s
@@ -73,12 +74,14 @@ pub fn cylinder_samples(r: f64, z0: f64, z1: f64, n: usize, rng: &mut ChaCha8Rng
         let t = rng.random_range(0.0..side + 2.0 * cap);
         let a = rng.random_range(0.0..std::f64::consts::TAU);
         if t < side {
-            s.points.push([r * a.cos(), r * a.sin(), rng.random_range(z0..z1)]);
+            s.points
+                .push([r * a.cos(), r * a.sin(), rng.random_range(z0..z1)]);
             s.normals.push([a.cos(), a.sin(), 0.0]);
         } else {
             let rr = r * rng.random_range(0.0f64..1.0).sqrt();
             let top = t >= side + cap;
-            s.points.push([rr * a.cos(), rr * a.sin(), if top { z1 } else { z0 }]);
+            s.points
+                .push([rr * a.cos(), rr * a.sin(), if top { z1 } else { z0 }]);
             s.normals.push([0.0, 0.0, if top { 1.0 } else { -1.0 }]);
         }
     }
@@ -106,7 +109,13 @@ pub fn ponq_per_sample(s: &Samples) -> Ponq {
         .zip(&s.normals)
         .map(|(p, n)| Quadric::from_plane(*p, *n))
         .collect();
-    Ponq::new(s.points.clone(), s.normals.clone(), q, Some(s.points.clone())).expect("finite")
+    Ponq::new(
+        s.points.clone(),
+        s.normals.clone(),
+        q,
+        Some(s.points.clone()),
+    )
+    .expect("finite")
 }
 
 pub fn rng(seed: u64) -> ChaCha8Rng {

@@ -1,0 +1,48 @@
+//! Delaunay benchmark: random points in a cube and exact lattices (all co-spherical).
+//! `cargo bench -p ponq-mesh --bench delaunay_bench`
+
+use ponq_mesh::delaunay::Delaunay;
+use std::time::Instant;
+
+fn main() {
+    let mut s = 1u64;
+    let mut r = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    println!("| input | points | tets | time (ms) | us / point |");
+    println!("|---|---:|---:|---:|---:|");
+    let mut row = |name: &str, pts: &[[f64; 3]]| {
+        let mut best = f64::MAX;
+        let mut tets = 0;
+        for _ in 0..3 {
+            let t = Instant::now();
+            let dt = Delaunay::new(pts).expect("finite points");
+            best = best.min(t.elapsed().as_secs_f64());
+            tets = dt.tets.len();
+        }
+        println!(
+            "| {name} | {} | {tets} | {:.1} | {:.2} |",
+            pts.len(),
+            best * 1e3,
+            best * 1e6 / pts.len() as f64
+        );
+    };
+    for n in [10_000usize, 100_000, 400_000] {
+        let pts: Vec<[f64; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
+        row("random in a cube", &pts);
+    }
+    for m in [30usize, 47] {
+        let mut pts = Vec::new();
+        for i in 0..m {
+            for j in 0..m {
+                for k in 0..m {
+                    pts.push([i as f64 * 0.1, j as f64 * 0.1, k as f64 * 0.1]);
+                }
+            }
+        }
+        row("lattice (co-spherical)", &pts);
+    }
+}

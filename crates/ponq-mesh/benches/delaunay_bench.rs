@@ -14,7 +14,7 @@ fn main() {
     };
     println!("| input | points | tets | time (ms) | us / point |");
     println!("|---|---:|---:|---:|---:|");
-    let mut row = |name: &str, pts: &[[f64; 3]]| {
+    let row = |name: &str, pts: &[[f64; 3]]| {
         let mut best = f64::MAX;
         let mut tets = 0;
         for _ in 0..3 {

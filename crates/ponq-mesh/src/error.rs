@@ -5,13 +5,10 @@ use std::path::PathBuf;
 /// Everything that can go wrong in `ponq-mesh`.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// An I/O error while reading or writing `path`.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// An I/O error while reading or writing `path` (the message includes the cause, so the
+    /// error is not chained a second time).
+    #[error("{path}: {err}")]
+    Io { path: PathBuf, err: std::io::Error },
     /// A file that exists but whose content cannot be understood.
     #[error("{path}: {msg}")]
     Format { path: PathBuf, msg: String },
@@ -38,7 +35,7 @@ impl Error {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
-            source,
+            err: source,
         }
     }
 }

@@ -57,7 +57,7 @@ fn run(a: &Args) -> Result<bool> {
     {
         bail!("--open threshold must be in [0, 1], got {t}");
     }
-    let mesh = io::read_mesh(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let mesh = io::read_mesh(&a.input).context("reading the input mesh")?;
     let bar = if a.quiet {
         ProgressBar::hidden()
     } else {
@@ -79,14 +79,14 @@ fn run(a: &Args) -> Result<bool> {
     let fitted = fit_mesh(&mesh, &opts, |i| bar.set_position(i as u64))?;
     bar.finish_and_clear();
     if let Some(p) = &a.save_ponq {
-        io::npz::write_ponq(p, &fitted.ponq).with_context(|| format!("writing {}", p.display()))?;
+        io::npz::write_ponq(p, &fitted.ponq).context("writing the PoNQ file")?;
     }
     let out = if a.original_frame {
         fitted.normalization.invert_mesh(&fitted.meshing.mesh)
     } else {
         fitted.meshing.mesh.clone()
     };
-    io::write_mesh(&a.output, &out).with_context(|| format!("writing {}", a.output.display()))?;
+    io::write_mesh(&a.output, &out).context("writing the output mesh")?;
     let report = validity::check(&fitted.meshing.mesh);
     let ok = if a.open.is_some() {
         report.self_intersections == 0 && report.nonmanifold_edges == 0

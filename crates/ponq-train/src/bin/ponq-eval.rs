@@ -72,8 +72,8 @@ fn run(cli: Cli) -> Result<()> {
             if samples == 0 {
                 bail!("--samples must be positive");
             }
-            let p = io::read_mesh(&pred).with_context(|| format!("reading {}", pred.display()))?;
-            let g = io::read_mesh(&gt).with_context(|| format!("reading {}", gt.display()))?;
+            let p = io::read_mesh(&pred).context("reading the predicted mesh")?;
+            let g = io::read_mesh(&gt).context("reading the ground-truth mesh")?;
             if g.faces.is_empty() {
                 bail!("the ground truth {} has no face", gt.display());
             }

@@ -1,0 +1,205 @@
+//! PoNQ-lite / hierarchy, and the `ponq-mesh` command line end to end.
+
+mod common;
+
+use std::process::Command;
+
+use common::*;
+use ponq_mesh::lite::{cell_of, coarsen};
+use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::{Ponq, Quadric, io, validity};
+
+fn grid_ponq(n: usize) -> (Ponq, Vec<[u32; 3]>) {
+    // Four points per cell, like the network's P = 4: split each cell's samples in 4 groups.
+    let s = box_samples(
+        [-0.47, -0.41, -0.29],
+        [0.53, 0.39, 0.31],
+        80_000,
+        &mut rng(5),
+    );
+    let dom = ([-1.0; 3], [1.0; 3]);
+    let ids: Vec<u32> = s
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = cell_of(*p, n, dom);
+            ((((c[0] as usize * n) + c[1] as usize) * n + c[2] as usize) * 4 + i % 4) as u32
+        })
+        .collect();
+    let (ponq, clusters) = Ponq::from_clusters(&s.points, &s.normals, &ids, n * n * n * 4).unwrap();
+    let cells = clusters
+        .iter()
+        .map(|&c| {
+            let cell = c as usize / 4;
+            [
+                (cell / (n * n)) as u32,
+                ((cell / n) % n) as u32,
+                (cell % n) as u32,
+            ]
+        })
+        .collect();
+    (ponq, cells)
+}
+
+#[test]
+fn lite_sums_quadrics_per_cell_and_meshes_validly() {
+    let n = 16;
+    let (ponq, cells) = grid_ponq(n);
+    let lite = coarsen(&ponq, &cells, 0).unwrap();
+    let mut distinct = cells.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    assert_eq!(lite.len(), distinct.len(), "one point per occupied cell");
+    // The quadrics are sums: the total is preserved.
+    let total = |p: &Ponq| p.quadrics.iter().fold(Quadric::zero(), |a, q| a + *q);
+    let (a, b) = (total(&ponq), total(&lite));
+    assert!((a.to_matrix4() - b.to_matrix4()).norm() < 1e-9 * a.to_matrix4().norm());
+    let out = mesh_ponq(
+        &lite,
+        &MeshingOptions {
+            grid_scale: n as f64,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(validity::check(&out.mesh).is_valid());
+    assert!(out.mesh.vertices.len() <= lite.len());
+    // The hierarchy: each level has fewer points and still meshes validly.
+    let mut last = lite.len();
+    for k in 1..=2 {
+        let c = coarsen(&ponq, &cells, k).unwrap();
+        assert!(c.len() < last, "level {k}: {} !< {last}", c.len());
+        last = c.len();
+        let out = mesh_ponq(
+            &c,
+            &MeshingOptions {
+                grid_scale: (n >> k) as f64,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let r = validity::check(&out.mesh);
+        assert!(r.is_valid() || out.mesh.faces.is_empty(), "level {k}: {r}");
+    }
+    assert!(coarsen(&ponq, &cells[1..], 0).is_err());
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_ponq-mesh"))
+}
+
+fn example(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(name)
+}
+
+#[test]
+fn cli_meshes_the_shipped_example() {
+    let dir = std::env::temp_dir().join(format!("ponq-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (args, file) in [
+        (vec!["--grid-scale", "32"], "a.obj"),
+        (vec!["--grid-scale", "32", "--lite"], "b.ply"),
+        (
+            vec!["--grid-scale", "32", "--lite", "--coarsen", "1"],
+            "c.obj",
+        ),
+    ] {
+        let out = dir.join(file);
+        let o = bin()
+            .arg(example("csg_ponq_32.npz"))
+            .arg("-o")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(stdout.contains("validity: valid"), "{stdout}");
+        let m = io::read_mesh(&out).unwrap();
+        assert!(validity::check(&m).is_valid());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn cli_bad_input_is_a_clear_error() {
+    let dir = std::env::temp_dir().join(format!("ponq-cli-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let garbage = dir.join("garbage.npz");
+    std::fs::write(&garbage, b"this is not a zip file").unwrap();
+    let nan = dir.join("nan.npz");
+    let mut p = io::npz::read_ponq(example("csg_ponq_32.npz")).unwrap();
+    p.points[3][1] = f64::NAN;
+    // Ponq::new refuses NaN, so write the file through the raw struct.
+    io::npz::write_ponq(&nan, &p).ok();
+    let cases: Vec<(Vec<std::ffi::OsString>, &str)> = vec![
+        (
+            vec![
+                dir.join("missing.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+            ],
+            "missing.npz",
+        ),
+        (
+            vec![
+                garbage.clone().into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+            ],
+            "zip",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.xyz").into(),
+            ],
+            "unsupported",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+                "--grid-scale".into(),
+                "0".into(),
+            ],
+            "grid-scale",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+                "--coarsen".into(),
+                "2".into(),
+            ],
+            "--lite",
+        ),
+    ];
+    for (args, needle) in cases {
+        let o = bin().args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr).to_lowercase();
+        assert!(err.contains(&needle.to_lowercase()), "{args:?}: {err}");
+    }
+    if nan.exists() {
+        let o = bin()
+            .arg(&nan)
+            .arg("-o")
+            .arg(dir.join("x.obj"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("not finite"));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

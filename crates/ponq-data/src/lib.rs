@@ -13,6 +13,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
+pub mod dataset;
 pub mod error;
 pub mod fit;
 pub mod normalize;

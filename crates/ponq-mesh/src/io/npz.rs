@@ -223,3 +223,92 @@ pub fn write_ponq(path: impl AsRef<Path>, ponq: &Ponq) -> Result<()> {
         .map_err(|e| io(std::io::Error::other(e)))?;
     w.flush().map_err(io)
 }
+
+/// One named array of an `.npz` archive: `shape` in C order and the values, stored as
+/// `float32` (`f32_storage`) or `float64`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedArray {
+    /// Array name (the file `NAME.npy` in the archive).
+    pub name: String,
+    /// Shape, C order.
+    pub shape: Vec<usize>,
+    /// Values, C order; `shape.iter().product()` of them.
+    pub data: Vec<f64>,
+    /// Store as `float32` instead of `float64`.
+    pub f32_storage: bool,
+}
+
+/// Writes named float arrays to an `.npz` archive (uncompressed, like `np.savez`).
+///
+/// # Errors
+/// [`Error::InvalidInput`] for a shape that does not match its data, [`Error::Io`] when
+/// writing fails.
+pub fn write_arrays(path: impl AsRef<Path>, arrays: &[NamedArray]) -> Result<()> {
+    let path = path.as_ref();
+    for a in arrays {
+        if a.shape.iter().product::<usize>() != a.data.len() {
+            return Err(Error::InvalidInput(format!(
+                "array '{}': shape {} does not hold {} values",
+                a.name,
+                shape_str(&a.shape),
+                a.data.len()
+            )));
+        }
+    }
+    let io = |e: std::io::Error| Error::io(path, e);
+    let file = std::fs::File::create(path).map_err(io)?;
+    let mut npz = npyz::npz::NpzWriter::new(BufWriter::new(file));
+    for a in arrays {
+        let shape: Vec<u64> = a.shape.iter().map(|&d| d as u64).collect();
+        if a.f32_storage {
+            let bytes = shape.iter().fold(4u64, |acc, &d| acc.saturating_mul(d));
+            let options = zip::write::FileOptions::default()
+                .compression_method(zip::CompressionMethod::Stored)
+                .large_file(bytes > u32::MAX as u64 / 2);
+            let mut w = npz
+                .array::<f32>(&a.name, options)
+                .map_err(io)?
+                .default_dtype()
+                .shape(&shape)
+                .begin_nd()
+                .map_err(io)?;
+            w.extend(a.data.iter().map(|&x| x as f32)).map_err(io)?;
+            w.finish().map_err(io)?;
+        } else {
+            write_array(&mut npz, &a.name, &shape, a.data.iter().copied()).map_err(io)?;
+        }
+    }
+    let mut w = npz
+        .zip_writer()
+        .finish()
+        .map_err(|e| io(std::io::Error::other(e)))?;
+    w.flush().map_err(io)
+}
+
+/// Reads every float array of an `.npz` archive (any float dtype, byte order or memory
+/// order), sorted by name. Arrays of other dtypes are an error naming the array.
+///
+/// # Errors
+/// [`Error::Io`] for an unreadable file, [`Error::Format`] for anything that is not a valid
+/// archive of float arrays.
+pub fn read_arrays(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>> {
+    let path = path.as_ref();
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut zip = ZipArchive::new(BufReader::new(file))
+        .map_err(|e| Error::format(path, format!("not a .npz (zip) archive: {e}")))?;
+    let mut names: Vec<String> = zip
+        .file_names()
+        .filter_map(npyz::npz::array_name_from_file_name)
+        .map(str::to_string)
+        .collect();
+    names.sort_unstable();
+    let mut out = Vec::with_capacity(names.len());
+    for name in names {
+        match get_array(&mut zip, &name) {
+            Ok(Some(a)) => out.push((name, a)),
+            Ok(None) => {}
+            Err(m) => return Err(Error::format(path, m)),
+        }
+    }
+    Ok(out)
+}

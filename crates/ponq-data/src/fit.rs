@@ -132,12 +132,6 @@ pub fn optimise_points(
     let mut v = vec![[0.0f64; 3]; np];
     let mut last = 0.0;
     let mut bs: Vec<[f64; 3]> = Vec::with_capacity(batch);
-    // The point -> sample term uses the nearest of all samples (one k-d tree built once) and
-    // the sample -> point term a random batch: an unbiased-in-spirit, lower-variance variant
-    // of the batch Chamfer loss that halves the k-d tree work per step.
-    let Some(si) = PointIndex::new(samples) else {
-        return 0.0;
-    };
     for it in 0..iterations {
         bs.clear();
         bs.extend(
@@ -145,7 +139,7 @@ pub fn optimise_points(
                 .iter()
                 .map(|i| samples[i]),
         );
-        let Some(pi) = PointIndex::new(points) else {
+        let (Some(si), Some(pi)) = (PointIndex::new(&bs), PointIndex::new(points)) else {
             break;
         };
         let p2s = si.nearest_many(points);
@@ -154,7 +148,7 @@ pub fn optimise_points(
             .par_iter()
             .zip(&p2s)
             .map(|(p, &(j, _))| {
-                let s = samples[j as usize];
+                let s = bs[j as usize];
                 std::array::from_fn(|k| 2.0 * (p[k] - s[k]) / np as f64)
             })
             .collect();

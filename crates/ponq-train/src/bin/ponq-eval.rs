@@ -5,8 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use ponq_mesh::io;
 use ponq_mesh::metrics::{MetricOptions, compare, grid_frame_to_gt};
+use ponq_mesh::{io, validity};
 
 /// Evaluate reconstructions: CD (x1e5), F1, NC, ECD (x1e2), EF1, watertightness, #V, #F,
 /// with both meshes at the ground truth's unit bounding-box diagonal (SPEC section 8).
@@ -28,6 +28,12 @@ enum Frame {
 
 #[derive(Subcommand, Debug)]
 enum Cmd {
+    /// Check a mesh: closed, oriented, manifold, free of self-intersections (exact
+    /// predicates). Exit status 0 when valid, 1 when not.
+    Check {
+        /// Mesh file (.obj, .ply, .off, .stl).
+        mesh: PathBuf,
+    },
     /// Compare one predicted mesh with its ground truth.
     Compare {
         /// Predicted mesh (.obj, .ply, .off, .stl).
@@ -61,6 +67,20 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
+        Cmd::Check { mesh } => {
+            let m = io::read_mesh(&mesh).context("reading the mesh")?;
+            let r = validity::check(&m);
+            println!(
+                "{}: {} V, {} F: {r}",
+                mesh.display(),
+                m.vertices.len(),
+                m.faces.len()
+            );
+            if !r.is_valid() {
+                std::process::exit(1);
+            }
+            Ok(())
+        }
         Cmd::Compare {
             pred,
             gt,
@@ -73,6 +93,9 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--samples must be positive");
             }
             let p = io::read_mesh(&pred).context("reading the predicted mesh")?;
+            // Validity is checked on the file as written: mapping it to another frame rounds
+            // coordinates, which can create or remove exact contacts.
+            let watertight = validity::check(&p).is_valid();
             let g = io::read_mesh(&gt).context("reading the ground-truth mesh")?;
             if g.faces.is_empty() {
                 bail!("the ground truth {} has no face", gt.display());
@@ -89,9 +112,14 @@ fn run(cli: Cli) -> Result<()> {
                     surface_samples: samples,
                     edge_samples: samples,
                     seed,
+                    check_validity: false,
                     ..Default::default()
                 },
             );
+            let m = ponq_mesh::metrics::Metrics {
+                watertight: Some(watertight),
+                ..m
+            };
             let wt = match m.watertight {
                 Some(true) => "yes",
                 Some(false) => "no",

@@ -18,5 +18,6 @@ pub mod error;
 pub mod fit;
 pub mod normalize;
 pub mod sampling;
+pub mod synth;
 
 pub use error::{DataError, Result};

@@ -17,7 +17,10 @@ pub mod dataset;
 pub mod error;
 pub mod fit;
 pub mod normalize;
+pub mod occupancy;
+pub mod prep;
 pub mod sampling;
+pub mod sdf;
 pub mod synth;
 
 pub use error::{DataError, Result};

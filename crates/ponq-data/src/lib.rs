@@ -16,6 +16,7 @@
 pub mod dataset;
 pub mod error;
 pub mod fit;
+pub mod hdf5;
 pub mod normalize;
 pub mod occupancy;
 pub mod prep;

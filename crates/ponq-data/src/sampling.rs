@@ -3,7 +3,7 @@
 //! degrees about the boundary (`normalise(edge x face normal)`), so that the quadrics of
 //! boundary points become elongated along the boundary.
 
-pub use ponq_mesh::sampling::{SurfaceSamples, face_normal, sample_surface};
+pub use ponq_mesh::sampling::{SurfaceSamples, face_normal, sample_surface, weighted_indices};
 
 use ponq_mesh::TriMesh;
 use rand::{Rng, SeedableRng};
@@ -45,24 +45,16 @@ pub fn sample_boundary(mesh: &TriMesh, n: usize, seed: u64) -> SurfaceSamples {
     if edges.is_empty() || n == 0 {
         return out;
     }
-    let len = |&(a, b, _): &(u32, u32, u32)| {
-        let (p, q) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
-        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-    };
-    let mut cdf = Vec::with_capacity(edges.len());
-    let mut acc = 0.0;
-    for e in &edges {
-        acc += len(e);
-        cdf.push(acc);
-    }
-    if !(acc > 0.0) {
-        return out;
-    }
+    let lengths: Vec<f64> = edges
+        .iter()
+        .map(|&(a, b, _)| {
+            let (p, q) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
+            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        })
+        .collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    for _ in 0..n {
-        let r = rng.random_range(0.0..acc);
-        let i = cdf.partition_point(|&c| c <= r).min(edges.len() - 1);
-        let (a, b, f) = edges[i];
+    for i in weighted_indices(&lengths, n, &mut rng) {
+        let (a, b, f) = edges[i as usize];
         let (p, q) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
         let t: f64 = rng.random();
         let x = std::array::from_fn(|k| p[k] + t * (q[k] - p[k]));

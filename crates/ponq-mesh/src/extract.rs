@@ -17,18 +17,10 @@ pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>
             }
         }
     }
-    let mut map = vec![u32::MAX; cx.dt.vertices.len()];
-    let mut back = Vec::new();
-    let mut vertices = Vec::new();
-    for f in &mut faces {
-        for v in f.iter_mut() {
-            if map[*v as usize] == u32::MAX {
-                map[*v as usize] = vertices.len() as u32;
-                vertices.push(*cx.pos(*v));
-                back.push(*v);
-            }
-            *v = map[*v as usize];
-        }
-    }
-    (TriMesh { vertices, faces }, back)
+    let mut mesh = TriMesh {
+        vertices: cx.dt.vertices.clone(),
+        faces,
+    };
+    let back = mesh.remove_unreferenced_vertices();
+    (mesh, back)
 }

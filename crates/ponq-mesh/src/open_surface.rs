@@ -15,19 +15,5 @@ pub const DEFAULT_OPEN_THRESHOLD: f64 = 0.35;
 pub fn cull_open(mesh: &mut TriMesh, anisotropy: &[f64], threshold: f64) -> Vec<u32> {
     mesh.faces
         .retain(|f| f.iter().any(|&v| anisotropy[v as usize] <= threshold));
-    let mut map = vec![u32::MAX; mesh.vertices.len()];
-    let mut keep = Vec::new();
-    let mut verts = Vec::new();
-    for f in &mut mesh.faces {
-        for v in f.iter_mut() {
-            if map[*v as usize] == u32::MAX {
-                map[*v as usize] = verts.len() as u32;
-                verts.push(mesh.vertices[*v as usize]);
-                keep.push(*v);
-            }
-            *v = map[*v as usize];
-        }
-    }
-    mesh.vertices = verts;
-    keep
+    mesh.remove_unreferenced_vertices()
 }

@@ -46,7 +46,7 @@ pub fn face_normal(mesh: &TriMesh, f: usize) -> [f64; 3] {
 
 /// Picks `n` indices with probability proportional to `weights` (cumulative table + binary
 /// search); empty when all weights are zero.
-fn weighted_indices(weights: &[f64], n: usize, rng: &mut ChaCha8Rng) -> Vec<u32> {
+pub fn weighted_indices(weights: &[f64], n: usize, rng: &mut ChaCha8Rng) -> Vec<u32> {
     let mut cdf = Vec::with_capacity(weights.len());
     let mut acc = 0.0;
     for w in weights {

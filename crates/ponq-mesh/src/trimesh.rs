@@ -58,20 +58,22 @@ impl TriMesh {
         Some((lo, hi))
     }
 
-    /// Removes vertices no face refers to; the kept vertices are renumbered in order of first use.
-    pub fn remove_unreferenced_vertices(&mut self) {
+    /// Removes vertices no face refers to; the kept vertices are renumbered in order of first
+    /// use by the faces. Returns, for each kept vertex, its index before the call.
+    pub fn remove_unreferenced_vertices(&mut self) -> Vec<u32> {
         let mut map = vec![u32::MAX; self.vertices.len()];
-        let mut verts = Vec::new();
+        let mut old = Vec::new();
         for f in &mut self.faces {
             for v in f.iter_mut() {
                 let m = &mut map[*v as usize];
                 if *m == u32::MAX {
-                    *m = verts.len() as u32;
-                    verts.push(self.vertices[*v as usize]);
+                    *m = old.len() as u32;
+                    old.push(*v);
                 }
                 *v = *m;
             }
         }
-        self.vertices = verts;
+        self.vertices = old.iter().map(|&v| self.vertices[v as usize]).collect();
+        old
     }
 }

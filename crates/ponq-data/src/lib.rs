@@ -1,9 +1,15 @@
 //! # ponq-data
 //!
-//! From meshes to PoNQ inputs: [`normalize`] (the `[-1,1]` convention and its inverse),
-//! [`sampling`] (surface samples, and boundary samples for open surfaces), and [`fit`], the
-//! optimisation-based PoNQ of the paper (points fitted to a sampled mesh with Adam on the
-//! Chamfer distance, then normals and quadrics per Voronoi cell).
+//! From meshes to PoNQ inputs:
+//! - [`normalize`]: the `[-1,1]` convention and its inverse;
+//! - [`sampling`]: surface samples, and boundary samples for open surfaces;
+//! - [`sdf`] + [`occupancy`]: exact signed distance grids (the network's input) and the
+//!   ground-truth occupancy / "close" masks;
+//! - [`synth`]: seeded procedural CAD-like training shapes;
+//! - [`dataset`] (the project's one-`.npz`-per-shape format, split files) and [`hdf5`] (the
+//!   authors' preprocessed files); [`prep`] builds datasets (`ponq-prep`);
+//! - [`fit`]: the optimisation-based PoNQ of the paper (points fitted to a sampled mesh with
+//!   Adam on the Chamfer distance, then normals and quadrics per Voronoi cell; `ponq-fit`).
 //!
 //! ```no_run
 //! use ponq_data::fit::{FitOptions, fit_mesh};

@@ -36,12 +36,12 @@ enum Command {
     /// winding number's, exact on every node of a closed mesh; open meshes get a warning.
     Sdf(SdfArgs),
     /// Prepare a folder (searched recursively) or a list file of meshes as dataset records:
-    /// one OUT/<name>.npz per mesh with `pointcloud`, `normals`, `<res>_sdf` and
+    /// one OUT/NAME.npz per mesh with `pointcloud`, `normals`, `<res>_sdf` and
     /// `<res>_occupancy` in the [-1,1] frame. Runs in parallel; shapes already in OUT are
     /// skipped (a killed run resumes); a bad mesh is skipped with its reason.
     Meshes(MeshesArgs),
     /// Generate procedural CAD-like shapes (seeds S..S+N) and prepare them like `meshes`,
-    /// with their exact analytic surface samples: OUT/synth_<seed>.npz.
+    /// with their exact analytic surface samples: OUT/synth_SEED.npz.
     Synth(SynthArgs),
 }
 

@@ -28,6 +28,7 @@ pub mod extract;
 pub mod io;
 pub mod lite;
 pub mod manifold;
+pub mod marching_cubes;
 pub mod maxflow;
 pub mod mesher;
 pub mod metrics;

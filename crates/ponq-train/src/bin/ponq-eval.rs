@@ -28,6 +28,15 @@ enum Frame {
 
 #[derive(Subcommand, Debug)]
 enum Cmd {
+    /// Marching cubes baseline: the zero level set of an SDF grid (.npy, nodes spanning the
+    /// [-1,1]^3 box, negative inside, as written by `ponq-prep sdf`).
+    Mc {
+        /// SDF grid (.npy, float32 or float64, rank 3).
+        sdf: PathBuf,
+        /// Output mesh (.obj, .ply, .off).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Check a mesh: closed, oriented, manifold, free of self-intersections (exact
     /// predicates). Exit status 0 when valid, 1 when not.
     Check {
@@ -67,6 +76,23 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
+        Cmd::Mc { sdf, output } => {
+            let g = io::npy::read_npy_grid(&sdf).context("reading the SDF grid")?;
+            let t = std::time::Instant::now();
+            let m =
+                ponq_mesh::marching_cubes::marching_cubes(&g.data, g.dims, [-1.0; 3], [1.0; 3])?;
+            let secs = t.elapsed().as_secs_f64();
+            io::write_mesh(&output, &m).context("writing the mesh")?;
+            println!(
+                "{}: {} V, {} F in {:.1} ms; {}",
+                output.display(),
+                m.vertices.len(),
+                m.faces.len(),
+                secs * 1e3,
+                validity::check(&m)
+            );
+            Ok(())
+        }
         Cmd::Check { mesh } => {
             let m = io::read_mesh(&mesh).context("reading the mesh")?;
             let r = validity::check(&m);

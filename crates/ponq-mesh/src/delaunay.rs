@@ -16,7 +16,7 @@
 //! ```
 
 use crate::error::{Error, Result};
-use crate::predicates::{in_conflict, orient3d};
+use crate::predicates::{in_conflict_bounded, orient3d, static_insphere_bound};
 
 /// Marker for "no neighbour" (a face on the boundary of the triangulated region).
 pub const NONE: u32 = u32::MAX;
@@ -231,6 +231,9 @@ struct Builder {
     /// Real vertices followed by the 4 super-tetrahedron vertices.
     pos: Vec<[f64; 3]>,
     n_real: u32,
+    /// Static insphere bound for tets of real vertices only (their differences are bounded by
+    /// the extent of the input).
+    static_eps: f64,
     tets: Vec<Tet>,
     free: Vec<u32>,
     rng: SplitMix,
@@ -269,6 +272,8 @@ impl Builder {
             .map(|k| hi[k] - lo[k])
             .fold(0.0f64, f64::max)
             .max(1.0);
+        let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
+        let static_eps = static_insphere_bound(extent);
         let s = 1000.0 * r;
         pos.push([c[0] - s, c[1] - s, c[2] - s]);
         pos.push([c[0] + 3.0 * s, c[1] - s, c[2] - s]);
@@ -294,6 +299,7 @@ impl Builder {
         Self {
             pos,
             n_real,
+            static_eps,
             tets,
             free: Vec::new(),
             rng: SplitMix(12345),
@@ -379,11 +385,18 @@ impl Builder {
 
     #[inline]
     fn conflicts(&self, tv: [u32; 4], v: u32) -> bool {
-        in_conflict(
+        let n = self.n_real;
+        let eps = if tv[0] < n && tv[1] < n && tv[2] < n && tv[3] < n {
+            self.static_eps
+        } else {
+            f64::INFINITY
+        };
+        in_conflict_bounded(
             [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])],
             tv,
             self.p(v),
             v,
+            eps,
         )
     }
 

@@ -85,6 +85,21 @@ fn orient3d_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32
 /// Shewchuk's adaptive exact predicate.
 #[inline]
 pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> i32 {
+    insphere_bounded(a, b, c, d, e, f64::INFINITY)
+}
+
+/// [`insphere`] with a static error bound tried first: `static_eps` must be at least
+/// `1e-12 * D^5` where `D` bounds every coordinate difference of the five points (see
+/// [`static_insphere_bound`]); `f64::INFINITY` disables it.
+#[inline]
+pub fn insphere_bounded(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+    e: &[f64; 3],
+    static_eps: f64,
+) -> i32 {
     let (ax, ay, az) = (a[0] - e[0], a[1] - e[1], a[2] - e[2]);
     let (bx, by, bz) = (b[0] - e[0], b[1] - e[1], b[2] - e[2]);
     let (cx, cy, cz) = (c[0] - e[0], c[1] - e[1], c[2] - e[2]);
@@ -107,6 +122,12 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
     // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
     // negative when e is inside the sphere of a positively oriented (a, b, c, d).
     let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
+    if det > static_eps {
+        return -1;
+    }
+    if det < -static_eps {
+        return 1;
+    }
     let mx = fmax(fmax(ax.abs(), bx.abs()), fmax(cx.abs(), dx.abs()));
     let my = fmax(fmax(ay.abs(), by.abs()), fmax(cy.abs(), dy.abs()));
     let mz = fmax(fmax(az.abs(), bz.abs()), fmax(cz.abs(), dz.abs()));
@@ -142,6 +163,18 @@ fn insphere_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f
     }
 }
 
+/// The static bound of [`insphere_bounded`] for points whose coordinate differences are at most
+/// `extent` (the largest side of their bounding box): the semi-static bound below with every
+/// maximum replaced by `extent`. `f64::INFINITY` (no static filter) outside the range where the
+/// error analysis holds without underflow or overflow.
+pub fn static_insphere_bound(extent: f64) -> f64 {
+    if extent > 1e-50 && extent < 1e40 {
+        1e-12 * extent.powi(5)
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Symbolically perturbed insphere test: is point `e` (with global index `ie`) in conflict with
 /// (strictly inside the circumsphere of) the positively oriented tetrahedron with vertices
 /// `t` (global indices `it`)?
@@ -151,7 +184,19 @@ fn insphere_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f
 /// must be distinct and the points pairwise distinct (deduplicate first).
 #[inline]
 pub fn in_conflict(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32) -> bool {
-    let s = insphere(t[0], t[1], t[2], t[3], e);
+    in_conflict_bounded(t, it, e, ie, f64::INFINITY)
+}
+
+/// [`in_conflict`] with the static filter of [`insphere_bounded`].
+#[inline]
+pub fn in_conflict_bounded(
+    t: [&[f64; 3]; 4],
+    it: [u32; 4],
+    e: &[f64; 3],
+    ie: u32,
+    static_eps: f64,
+) -> bool {
+    let s = insphere_bounded(t[0], t[1], t[2], t[3], e, static_eps);
     if s != 0 {
         return s > 0;
     }
@@ -281,9 +326,13 @@ mod tests {
                 orient3d(&p[0], &p[1], &p[2], &p[3]),
                 orient3d_exact(&p[0], &p[1], &p[2], &p[3])
             );
+            let exact = insphere_exact(&p[0], &p[1], &p[2], &p[3], &p[4]);
+            assert_eq!(insphere(&p[0], &p[1], &p[2], &p[3], &p[4]), exact);
+            // Every coordinate lies in [-1, 1] (or [1, 1 + 1e-30]): differences are at most 2.
+            let bound = static_insphere_bound(2.0);
             assert_eq!(
-                insphere(&p[0], &p[1], &p[2], &p[3], &p[4]),
-                insphere_exact(&p[0], &p[1], &p[2], &p[3], &p[4])
+                insphere_bounded(&p[0], &p[1], &p[2], &p[3], &p[4], bound),
+                exact
             );
         }
     }

@@ -193,18 +193,6 @@ mod tests {
         v
     }
 
-    fn volume(m: &TriMesh) -> f64 {
-        m.faces
-            .iter()
-            .map(|f| {
-                let [a, b, c] = f.map(|v| m.vertices[v as usize]);
-                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
-                    / 6.0
-            })
-            .sum()
-    }
-
     #[test]
     fn sphere_is_closed_oriented_and_has_the_right_volume() {
         let n = 24;
@@ -215,7 +203,11 @@ mod tests {
         let r = validity::check(&m);
         assert!(r.is_valid(), "{r}");
         let exact = 4.0 / 3.0 * std::f64::consts::PI * 0.61f64.powi(3);
-        assert!((volume(&m) - exact).abs() / exact < 0.02, "{}", volume(&m));
+        assert!(
+            (m.signed_volume() - exact).abs() / exact < 0.02,
+            "{}",
+            m.signed_volume()
+        );
     }
 
     #[test]
@@ -246,7 +238,7 @@ mod tests {
             let m = marching_cubes(&v, [n + 1; 3], [-1.0; 3], [1.0; 3]).unwrap();
             let r = validity::check_topology(&m);
             assert!(r.closed && r.oriented, "{r}");
-            assert!(volume(&m) > 0.0);
+            assert!(m.signed_volume() > 0.0);
         }
     }
 

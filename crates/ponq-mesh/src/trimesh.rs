@@ -58,6 +58,19 @@ impl TriMesh {
         Some((lo, hi))
     }
 
+    /// Signed volume enclosed by the faces (positive for a closed, outward-oriented mesh).
+    pub fn signed_volume(&self) -> f64 {
+        self.faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| self.vertices[v as usize]);
+                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                    / 6.0
+            })
+            .sum()
+    }
+
     /// Removes vertices no face refers to; the kept vertices are renumbered in order of first
     /// use by the faces. Returns, for each kept vertex, its index before the call.
     pub fn remove_unreferenced_vertices(&mut self) -> Vec<u32> {

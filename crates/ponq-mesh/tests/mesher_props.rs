@@ -30,25 +30,13 @@ fn assert_valid(out: &MeshingOutput, what: &str) {
     assert!(r.is_valid(), "{what}: {r}");
 }
 
-fn volume(m: &ponq_mesh::TriMesh) -> f64 {
-    m.faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|v| m.vertices[v as usize]);
-            (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                + a[2] * (b[0] * c[1] - b[1] * c[0]))
-                / 6.0
-        })
-        .sum()
-}
-
 #[test]
 fn sphere_is_watertight_with_the_right_volume() {
     let s = sphere_samples([0.05, -0.1, 0.0], 0.6, 40_000, &mut rng(1));
     let ponq = ponq_by_grid(&s, 32);
     let out = mesh(&ponq, 32.0);
     assert_valid(&out, "sphere");
-    let v = volume(&out.mesh);
+    let v = out.mesh.signed_volume();
     let exact = 4.0 / 3.0 * std::f64::consts::PI * 0.6f64.powi(3);
     assert!((v - exact).abs() / exact < 0.05, "volume {v} vs {exact}");
 }
@@ -64,7 +52,7 @@ fn box_keeps_its_corners_sharp() {
     let ponq = ponq_by_grid(&s, 16);
     let out = mesh(&ponq, 16.0);
     assert_valid(&out, "box");
-    let v = volume(&out.mesh);
+    let v = out.mesh.signed_volume();
     assert!((v - 0.48).abs() / 0.48 < 0.02, "volume {v}");
     // The QEM-optimal vertices recover the 8 corners (cells are not aligned with the box).
     let corners_found = (0..8)

@@ -285,7 +285,7 @@ fn attempt_shape(rng: &mut ChaCha8Rng, opts: &SynthOptions) -> Result<SynthShape
         return Err(format!("{components} connected components"));
     }
     // Volumes in the meshing frame.
-    let mesh_volume = volume(&mesh_m);
+    let mesh_volume = mesh_m.signed_volume();
     let (csg_volume, rel_sigma) = mc_volume(&solid, lo, hi, opts.volume_samples, keys[2]);
     let csg_volume = csg_volume * s0.powi(3);
     let tol = opts.volume_tolerance + 4.0 * rel_sigma;
@@ -454,16 +454,6 @@ fn components(mesh: &TriMesh) -> usize {
     (0..mesh.vertices.len() as u32)
         .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
         .count()
-}
-
-/// Signed volume enclosed by a closed, outward-oriented mesh.
-fn volume(mesh: &TriMesh) -> f64 {
-    (0..mesh.faces.len())
-        .map(|f| {
-            let [a, b, c] = mesh.triangle(f);
-            dot(a, geom::cross(b, c)) / 6.0
-        })
-        .sum()
 }
 
 /// Monte-Carlo volume of the solid in its bounding box `lo..hi` (padded by 1%), with the

@@ -1,0 +1,261 @@
+//! The PoNQ network (SPEC section 3): a 3D CNN encoder over the SDF grid and five
+//! per-cell decoders (points, normals, Cholesky factors, v* offsets, occupancy).
+//!
+//! Built from a [`PonqNetConfig`]; the default config is the paper's network
+//! (2,716,861 parameters). A narrow CPU variant is the same code with a smaller `width`.
+
+use burn::nn::PaddingConfig3d;
+use burn::nn::conv::{Conv3d, Conv3dConfig};
+use burn::prelude::*;
+use burn::tensor::activation::{leaky_relu, sigmoid};
+
+/// Slope of every LeakyReLU of the network.
+pub const LEAKY_SLOPE: f64 = 0.01;
+
+/// Hyper-parameters of [`PonqNet`].
+#[derive(Config, Debug, PartialEq)]
+pub struct PonqNetConfig {
+    /// Feature channels of the encoder and decoders (paper: 128).
+    #[config(default = 128)]
+    pub width: usize,
+    /// Points per cell `P` (paper: 4).
+    #[config(default = 4)]
+    pub points_per_cell: usize,
+    /// Kernel-3 convolutions after the kernel-2 input convolution (paper: 5). The receptive
+    /// field of a cell is `2 + 2 * encoder_layers` nodes per side.
+    #[config(default = 5)]
+    pub encoder_layers: usize,
+    /// Residual blocks per decoder (paper: 3).
+    #[config(default = 3)]
+    pub decoder_blocks: usize,
+}
+
+/// A residual block of two 1x1x1 convolutions: `lrelu(x + conv_2(lrelu(conv_1(x))))`.
+#[derive(Module, Debug)]
+pub struct ResBlock {
+    conv_1: Conv3d,
+    conv_2: Conv3d,
+}
+
+impl ResBlock {
+    fn new(width: usize, device: &Device) -> Self {
+        let c = || Conv3dConfig::new([width, width], [1, 1, 1]).init(device);
+        Self {
+            conv_1: c(),
+            conv_2: c(),
+        }
+    }
+
+    fn forward(&self, x: Tensor<5>) -> Tensor<5> {
+        let y = leaky_relu(self.conv_1.forward(x.clone()), LEAKY_SLOPE);
+        leaky_relu(self.conv_2.forward(y) + x, LEAKY_SLOPE)
+    }
+}
+
+/// One decoder: residual blocks then a 1x1x1 head with `outputs` channels.
+#[derive(Module, Debug)]
+pub struct Decoder {
+    blocks: Vec<ResBlock>,
+    head: Conv3d,
+}
+
+impl Decoder {
+    fn new(width: usize, blocks: usize, outputs: usize, device: &Device) -> Self {
+        Self {
+            blocks: (0..blocks).map(|_| ResBlock::new(width, device)).collect(),
+            head: Conv3dConfig::new([width, outputs], [1, 1, 1]).init(device),
+        }
+    }
+
+    /// `[B, W, n, n, n]` features -> `[B, n^3, outputs / dim, dim]` (channel `c` is point
+    /// `c / dim`, component `c % dim`).
+    fn forward(&self, features: Tensor<5>, dim: usize) -> Tensor<4> {
+        let mut x = features;
+        for b in &self.blocks {
+            x = b.forward(x);
+        }
+        let y = self.head.forward(x);
+        let [batch, channels, d1, d2, d3] = y.dims();
+        y.reshape([batch, channels, d1 * d2 * d3])
+            .swap_dims(1, 2)
+            .reshape([batch, d1 * d2 * d3, channels / dim, dim])
+    }
+}
+
+/// Where the cells of an input grid lie, so that the point offsets can be made absolute.
+///
+/// Invariant: `cell > 0`, `offset_scale > 0`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridFrame {
+    /// Position of node `(0,0,0)` of the input grid.
+    pub origin: [f64; 3],
+    /// Cell size (node spacing); `2 / N` for the whole `[-1,1]^3` grid of `N` cells.
+    pub cell: f64,
+    /// Head outputs are multiplied by this to give offsets: `1 / (N + 1)` as in the authors'
+    /// code, where `N` is the resolution of the whole grid (not of a crop).
+    pub offset_scale: f64,
+    /// Use the authors' slightly shifted cell bases `(2i/(N-1) - 1) * N/(N+1)` instead of the
+    /// true cell centres (only for the authors' pretrained weights, whole grids only).
+    pub authors_cell_base: bool,
+}
+
+impl GridFrame {
+    /// The whole `[-1,1]^3` grid of `n` cells per side.
+    pub fn whole(n: usize) -> Self {
+        Self {
+            origin: [-1.0; 3],
+            cell: 2.0 / n as f64,
+            offset_scale: 1.0 / (n as f64 + 1.0),
+            authors_cell_base: false,
+        }
+    }
+
+    /// A crop of the `[-1,1]^3` grid of `n` cells starting at node `start`.
+    pub fn crop(n: usize, start: [usize; 3]) -> Self {
+        let cell = 2.0 / n as f64;
+        Self {
+            origin: start.map(|s| -1.0 + s as f64 * cell),
+            cell,
+            offset_scale: 1.0 / (n as f64 + 1.0),
+            authors_cell_base: false,
+        }
+    }
+
+    /// Base position of cell `i` along `axis` of a grid with `cells` cells.
+    pub fn cell_base(&self, axis: usize, i: usize, cells: usize) -> f64 {
+        if self.authors_cell_base {
+            let n = cells as f64;
+            if cells < 2 {
+                return 0.0;
+            }
+            (2.0 * i as f64 / (n - 1.0) - 1.0) * n / (n + 1.0)
+        } else {
+            self.origin[axis] + (i as f64 + 0.5) * self.cell
+        }
+    }
+
+    /// `[cells^3 * 3]` cell bases in C order.
+    pub fn cell_bases(&self, cells: [usize; 3]) -> Vec<f32> {
+        let mut out = Vec::with_capacity(cells.iter().product::<usize>() * 3);
+        for i in 0..cells[0] {
+            for j in 0..cells[1] {
+                for k in 0..cells[2] {
+                    out.push(self.cell_base(0, i, cells[0]) as f32);
+                    out.push(self.cell_base(1, j, cells[1]) as f32);
+                    out.push(self.cell_base(2, k, cells[2]) as f32);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Network output for a batch of `B` grids of `C = n1 n2 n3` cells and `P` points per cell.
+#[derive(Debug, Clone)]
+pub struct PonqOutput {
+    /// `[B, C, P, 3]` absolute point positions.
+    pub points: Tensor<4>,
+    /// `[B, C, P, 3]` absolute v* (offset added to the detached points).
+    pub vstars: Tensor<4>,
+    /// `[B, C, P, 3]` raw (unnormalised) normals.
+    pub normals: Tensor<4>,
+    /// `[B, C, P, 6]` upper-triangular entries of `U` ((0,0),(0,1),(0,2),(1,1),(1,2),(2,2));
+    /// `A = U U^T`.
+    pub cholesky: Tensor<4>,
+    /// `[B, C]` occupancy probability (sigmoid).
+    pub occupancy: Tensor<2>,
+    /// Cells per axis.
+    pub cells: [usize; 3],
+}
+
+/// The PoNQ network.
+#[derive(Module, Debug)]
+pub struct PonqNet {
+    input: Conv3d,
+    encoder: Vec<Conv3d>,
+    decoder_points: Decoder,
+    decoder_normals: Decoder,
+    decoder_cholesky: Decoder,
+    decoder_vstars: Decoder,
+    decoder_occupancy: Decoder,
+    #[module(skip)]
+    points_per_cell: usize,
+}
+
+impl PonqNetConfig {
+    /// Builds the network with freshly initialised weights on `device`.
+    pub fn init(&self, device: &Device) -> PonqNet {
+        let w = self.width;
+        let p = self.points_per_cell;
+        let dec = |outputs| Decoder::new(w, self.decoder_blocks, outputs, device);
+        PonqNet {
+            input: Conv3dConfig::new([1, w], [2, 2, 2]).init(device),
+            encoder: (0..self.encoder_layers)
+                .map(|_| {
+                    Conv3dConfig::new([w, w], [3, 3, 3])
+                        .with_padding(PaddingConfig3d::Explicit(1, 1, 1))
+                        .init(device)
+                })
+                .collect(),
+            decoder_points: dec(3 * p),
+            decoder_normals: dec(3 * p),
+            decoder_cholesky: dec(6 * p),
+            decoder_vstars: dec(3 * p),
+            decoder_occupancy: dec(1),
+            points_per_cell: p,
+        }
+    }
+}
+
+impl PonqNet {
+    /// Points per cell `P`.
+    pub fn points_per_cell(&self) -> usize {
+        self.points_per_cell
+    }
+
+    /// Encoder features `[B, W, n1, n2, n3]` of input grids `[B, 1, n1+1, n2+1, n3+1]`.
+    pub fn encode(&self, sdf: Tensor<5>) -> Tensor<5> {
+        let mut x = leaky_relu(self.input.forward(sdf), LEAKY_SLOPE);
+        for c in &self.encoder {
+            x = leaky_relu(c.forward(x), LEAKY_SLOPE);
+        }
+        x
+    }
+
+    /// Runs the network on `[B, 1, n1+1, n2+1, n3+1]` SDF grids (already scaled, see
+    /// [`crate::network_input_scale`]) whose node `(0,0,0)` and spacing are given by `frame`.
+    pub fn forward(&self, sdf: Tensor<5>, frame: &GridFrame) -> PonqOutput {
+        let device = sdf.device();
+        let features = self.encode(sdf);
+        let [batch, _, n1, n2, n3] = features.dims();
+        let cells = n1 * n2 * n3;
+        let scale = frame.offset_scale as f32;
+        let bases = Tensor::<1>::from_data(
+            TensorData::new(frame.cell_bases([n1, n2, n3]), [cells * 3]),
+            &device,
+        )
+        .reshape([1, cells, 1, 3]);
+        let points = self
+            .decoder_points
+            .forward(features.clone(), 3)
+            .mul_scalar(scale)
+            + bases;
+        let vstars = self
+            .decoder_vstars
+            .forward(features.clone(), 3)
+            .mul_scalar(scale)
+            + points.clone().detach();
+        let normals = self.decoder_normals.forward(features.clone(), 3);
+        let cholesky = self.decoder_cholesky.forward(features.clone(), 6);
+        let occupancy =
+            sigmoid(self.decoder_occupancy.forward(features, 1)).reshape([batch, cells]);
+        PonqOutput {
+            points,
+            vstars,
+            normals,
+            cholesky,
+            occupancy,
+            cells: [n1, n2, n3],
+        }
+    }
+}

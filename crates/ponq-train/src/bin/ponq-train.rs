@@ -1,0 +1,108 @@
+//! `ponq-train`: trains the PoNQ network from a TOML config (see `configs/`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use ponq_model::backend::{BackendKind, device};
+use ponq_train::config::TrainConfig;
+use ponq_train::train::{RunOptions, run};
+
+/// Train the PoNQ network (SDF grid -> per-cell points, normals, quadrics, occupancy).
+///
+/// Writes OUT/checkpoint/ (model, optimizer, epoch; replaced atomically after every epoch),
+/// OUT/metrics.csv (losses per epoch), OUT/losses.png (their plot) and OUT/model.bpk +
+/// OUT/model.json (the final network, usable by `ponq-infer --model`).
+#[derive(Parser, Debug)]
+#[command(version, about, long_about)]
+struct Args {
+    /// Run configuration (TOML): configs/phase1.toml, phase2.toml, phase3.toml, cpu.toml,
+    /// smoke.toml.
+    #[arg(long)]
+    config: PathBuf,
+    /// Output folder [default: runs/<config name>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Continue from OUT/checkpoint (exactly: same shapes, crops and optimizer state).
+    #[arg(long)]
+    resume: bool,
+    /// Compute backend: flex (CPU, default) or wgpu (GPU; needs the `wgpu` cargo feature).
+    #[arg(long, default_value = "flex")]
+    backend: BackendKind,
+    /// Worker threads for the CPU backend and the data pipeline [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Override the number of epochs of the config.
+    #[arg(long)]
+    epochs: Option<usize>,
+    /// Override the time limit of the config (minutes; 0: none).
+    #[arg(long)]
+    time_limit: Option<f64>,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    match real_main() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn real_main() -> Result<()> {
+    let args = Args::parse();
+    if let Some(t) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t.max(1))
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
+    let mut cfg = TrainConfig::load(&args.config)?;
+    if let Some(e) = args.epochs {
+        cfg.train.epochs = e;
+    }
+    if let Some(t) = args.time_limit {
+        cfg.train.time_limit_minutes = t;
+    }
+    cfg.check()?;
+    let out = args.out.unwrap_or_else(|| {
+        let stem = args
+            .config
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "run".into());
+        PathBuf::from("runs").join(stem)
+    });
+    let device = device(args.backend).map_err(anyhow::Error::msg)?;
+    let opts = RunOptions {
+        out: out.clone(),
+        resume: args.resume,
+        device,
+        quiet: args.quiet,
+    };
+    let s = run(&cfg, &opts)?;
+    if !args.quiet {
+        let v = s
+            .validation
+            .last()
+            .map(|(e, v)| format!("; validation loss {:.4} (epoch {e})", v.total))
+            .unwrap_or_default();
+        println!(
+            "{} epochs{}; last training loss {:.4}{v}; model: {}",
+            s.epochs_done,
+            if s.stopped_by_time {
+                " (stopped by the time limit)"
+            } else {
+                ""
+            },
+            s.last_train.total,
+            out.join("model.bpk").display()
+        );
+    }
+    Ok(())
+}

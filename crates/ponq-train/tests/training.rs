@@ -1,0 +1,267 @@
+//! Data pipeline and training loop: crops and rotations keep samples on the zero level set,
+//! the smoke run's loss falls, resume repeats the uninterrupted run, the CLI works.
+
+use std::path::PathBuf;
+
+use ponq_model::backend;
+use ponq_train::config::TrainConfig;
+use ponq_train::data::{ItemOptions, make_item, sphere_shape};
+use ponq_train::train::{RunOptions, run_with_shapes};
+use rand::SeedableRng;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ponq-train-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Trilinear interpolation of a `(c+1)^3` node grid over `[-1, -1 + c * cell]^3`.
+fn interp(sdf: &[f32], c: usize, cell: f32, p: [f32; 3]) -> f32 {
+    let m = c + 1;
+    let mut idx = [0usize; 3];
+    let mut f = [0f32; 3];
+    for a in 0..3 {
+        let t = (p[a] + 1.0) / cell;
+        let i = (t.floor() as isize).clamp(0, c as isize - 1) as usize;
+        idx[a] = i;
+        f[a] = t - i as f32;
+    }
+    let mut v = 0.0;
+    for d in 0..8 {
+        let o = [(d >> 2) & 1, (d >> 1) & 1, d & 1];
+        let w: f32 = (0..3)
+            .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+            .product();
+        v += w * sdf[((idx[0] + o[0]) * m + idx[1] + o[1]) * m + idx[2] + o[2]];
+    }
+    v
+}
+
+#[test]
+fn crops_and_rotations_keep_samples_on_the_surface() {
+    // An off-centre sphere, so that a wrong axis map would move the surface.
+    let shape = sphere_shape("s", 16, [0.3, -0.2, 0.1], 0.5, 4000);
+    let cell = 2.0 / 16.0;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..40 {
+        let it = make_item(
+            &shape,
+            &ItemOptions {
+                crop: 8,
+                samples: 500,
+                augment: true,
+            },
+            &mut rng,
+        );
+        assert_eq!(it.sdf.len(), 9 * 9 * 9);
+        assert!(!it.samples.is_empty(), "crops are chosen to hold surface");
+        for (p, n) in it.samples.iter().zip(&it.normals) {
+            // On the zero level set (trilinear error of a sphere at this resolution)...
+            let v = interp(&it.sdf, 8, cell, *p);
+            assert!(v.abs() < 0.02, "sdf {v} at sample {p:?}");
+            // ... and the normal points outwards: the SDF grows along it.
+            let q: [f32; 3] = std::array::from_fn(|a| p[a] + 0.05 * n[a]);
+            if q.iter().all(|&x| (-1.0..=-1.0 + 8.0 * cell).contains(&x)) {
+                assert!(interp(&it.sdf, 8, cell, q) > v);
+            }
+        }
+        // Occupied cells are those holding samples; a cell with a sample is close.
+        let occupied = it.occupied.iter().filter(|&&o| o).count();
+        assert!(occupied > 0);
+        for (o, c) in it.occupied.iter().zip(&it.close) {
+            if *o {
+                assert!(
+                    *c,
+                    "an occupied cell of a sphere at this resolution is close"
+                );
+            }
+        }
+    }
+}
+
+fn smoke_config() -> TrainConfig {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../configs/smoke.toml");
+    let mut cfg = TrainConfig::load(&path).expect("configs/smoke.toml parses");
+    cfg.train.mesh_validate_every = 0;
+    cfg
+}
+
+fn shapes() -> (Vec<ponq_train::data::Shape>, Vec<ponq_train::data::Shape>) {
+    let train = vec![
+        sphere_shape("a", 8, [0.1, 0.0, -0.1], 0.5, 3000),
+        sphere_shape("b", 8, [-0.2, 0.1, 0.0], 0.6, 3000),
+        sphere_shape("c", 8, [0.0, -0.15, 0.2], 0.45, 3000),
+        sphere_shape("d", 8, [0.05, 0.05, 0.05], 0.65, 3000),
+    ];
+    let val = vec![sphere_shape("v", 8, [0.0, 0.1, 0.0], 0.55, 3000)];
+    (train, val)
+}
+
+#[test]
+fn smoke_training_loss_falls() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 20;
+    cfg.train.lr = 1e-2;
+    let (train, val) = shapes();
+    let out = tmp("falls");
+    let opts = RunOptions {
+        out: out.clone(),
+        resume: false,
+        device: backend::cpu(),
+        quiet: true,
+    };
+    let s = run_with_shapes(&cfg, &train, &val, &opts).expect("training runs");
+    assert_eq!(s.epochs_done, 20);
+    let k = 4;
+    let first: f64 = s.step_losses[..k].iter().sum::<f64>() / k as f64;
+    let last: f64 = s.step_losses[s.step_losses.len() - k..].iter().sum::<f64>() / k as f64;
+    assert!(last < 0.85 * first, "loss {first} -> {last}");
+    let v = &s.validation;
+    assert!(
+        v.last().unwrap().1.total < v.first().unwrap().1.total,
+        "{v:?}"
+    );
+    // Files of a run.
+    for f in [
+        "metrics.csv",
+        "losses.png",
+        "model.bpk",
+        "model.json",
+        "checkpoint/state.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 20);
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
+fn resume_repeats_the_uninterrupted_run() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 3;
+    let (train, val) = shapes();
+    let dev = backend::cpu();
+    // Both runs start from the same saved weights (initialisation draws from a global RNG
+    // that tests running in parallel share).
+    let init = tmp("init");
+    std::fs::create_dir_all(&init).unwrap();
+    let init_file = init.join("init.bpk");
+    let net = cfg.model.net();
+    ponq_model::weights::save(&net.init(&dev), &net, &init_file).unwrap();
+    cfg.train.init_from = Some(init_file);
+    let a = tmp("whole");
+    let whole = run_with_shapes(
+        &cfg,
+        &train,
+        &val,
+        &RunOptions {
+            out: a.clone(),
+            resume: false,
+            device: dev.clone(),
+            quiet: true,
+        },
+    )
+    .unwrap();
+    // Interrupted after epoch 2, then resumed.
+    let b = tmp("parts");
+    cfg.train.epochs = 2;
+    let first = run_with_shapes(
+        &cfg,
+        &train,
+        &val,
+        &RunOptions {
+            out: b.clone(),
+            resume: false,
+            device: dev.clone(),
+            quiet: true,
+        },
+    )
+    .unwrap();
+    cfg.train.epochs = 3;
+    let rest = run_with_shapes(
+        &cfg,
+        &train,
+        &val,
+        &RunOptions {
+            out: b.clone(),
+            resume: true,
+            device: dev,
+            quiet: true,
+        },
+    )
+    .unwrap();
+    assert_eq!(rest.epochs_done, 3);
+    let steps = first.step_losses.len();
+    assert_eq!(whole.step_losses.len(), steps + rest.step_losses.len());
+    for (i, (x, y)) in whole.step_losses[..steps]
+        .iter()
+        .zip(&first.step_losses)
+        .enumerate()
+    {
+        assert!((x - y).abs() <= 1e-5 * x.abs(), "step {i}: {x} vs {y}");
+    }
+    for (i, (x, y)) in whole.step_losses[steps..]
+        .iter()
+        .zip(&rest.step_losses)
+        .enumerate()
+    {
+        assert!(
+            (x - y).abs() <= 1e-4 * x.abs(),
+            "resumed step {i}: {x} vs {y}"
+        );
+    }
+    let csv = std::fs::read_to_string(b.join("metrics.csv")).unwrap();
+    assert_eq!(
+        csv.lines().count(),
+        1 + 3,
+        "one row per epoch across the resume"
+    );
+    std::fs::remove_dir_all(&a).ok();
+    std::fs::remove_dir_all(&b).ok();
+    std::fs::remove_dir_all(&init).ok();
+}
+
+#[test]
+fn cli_trains_the_smoke_config_and_rejects_bad_input() {
+    let exe = env!("CARGO_BIN_EXE_ponq-train");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let out = tmp("cli");
+    let o = std::process::Command::new(exe)
+        .current_dir(&root)
+        .args([
+            "--config",
+            "configs/smoke.toml",
+            "--epochs",
+            "2",
+            "-q",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("model.bpk").is_file());
+    // A missing config, an unknown key, a bad backend: exit 2 with a message.
+    let bad = out.join("bad.toml");
+    std::fs::write(&bad, "[train]\nepochz = 3\n").unwrap();
+    for args in [
+        vec!["--config".to_string(), "no/such.toml".into()],
+        vec!["--config".to_string(), bad.display().to_string()],
+    ] {
+        let o = std::process::Command::new(exe)
+            .current_dir(&root)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(!o.stderr.is_empty());
+    }
+    let o = std::process::Command::new(exe)
+        .current_dir(&root)
+        .args(["--config", "configs/smoke.toml", "--backend", "tpu"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    std::fs::remove_dir_all(&out).ok();
+}

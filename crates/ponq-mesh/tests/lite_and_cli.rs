@@ -106,6 +106,10 @@ fn cli_meshes_the_shipped_example() {
             vec!["--grid-scale", "32", "--lite", "--coarsen", "1"],
             "c.obj",
         ),
+        (
+            vec!["--grid-scale", "32", "--bounds", "-1,-1,-1,1,1,1"],
+            "d.obj",
+        ),
     ] {
         let out = dir.join(file);
         let o = bin()
@@ -173,6 +177,16 @@ fn cli_bad_input_is_a_clear_error() {
                 "0".into(),
             ],
             "grid-scale",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+                "--bounds".into(),
+                "-1,-1,-1,1,1".into(),
+            ],
+            "6 comma-separated",
         ),
         (
             vec![

@@ -24,7 +24,10 @@
 pub mod config;
 pub mod data;
 pub mod dataset;
+pub mod eval;
 pub mod infer;
 pub mod loss;
+pub mod models;
 pub mod plot;
+pub mod render;
 pub mod train;

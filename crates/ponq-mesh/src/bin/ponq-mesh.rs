@@ -41,7 +41,12 @@ struct Args {
     #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
     open: Option<f64>,
     /// Domain box xmin,ymin,zmin,xmax,ymax,zmax (default -1,-1,-1,1,1,1).
-    #[arg(long, value_delimiter = ',', num_args = 6, allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X0,Y0,Z0,X1,Y1,Z1"
+    )]
     bounds: Option<Vec<f64>>,
     /// Skip the manifold repair (output is still closed and free of self-intersections,
     /// but may have non-manifold edges or vertices, as the authors' mesher).
@@ -67,6 +72,11 @@ fn run(args: &Args) -> Result<bool> {
     let domain = match &args.bounds {
         None => ([-1.0; 3], [1.0; 3]),
         Some(b) => {
+            if b.len() != 6 {
+                bail!(
+                    "--bounds needs 6 comma-separated numbers xmin,ymin,zmin,xmax,ymax,zmax, got {b:?}"
+                );
+            }
             let d = ([b[0], b[1], b[2]], [b[3], b[4], b[5]]);
             if (0..3).any(|k| !(d.1[k] > d.0[k])) {
                 bail!("--bounds: each max must be larger than its min, got {b:?}");

@@ -28,6 +28,50 @@ enum Frame {
 
 #[derive(Subcommand, Debug)]
 enum Cmd {
+    /// Evaluate a split: every shape through PoNQ (and PoNQ-lite) and marching cubes at each
+    /// resolution; writes OUT/per_shape.csv, OUT/summary.md (the paper's table layout),
+    /// OUT/report.md with renders in OUT/renders/. Resumable: rerun the same command.
+    Run {
+        /// Folder of shapes: meshes (.obj/.ply/.off/.stl; their SDF grids are made here),
+        /// our .npz records or the authors' .hdf5 files (metrics from their samples; no
+        /// edge metrics without a mesh).
+        #[arg(long)]
+        data: PathBuf,
+        /// Split file (one id = file stem per line), e.g. configs/splits/abc_test.txt;
+        /// ids without a file are listed in the report, not fatal.
+        #[arg(long)]
+        split: Option<PathBuf>,
+        /// Grid resolutions (cells per side), comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "32")]
+        res: Vec<usize>,
+        /// Also evaluate PoNQ-lite.
+        #[arg(long)]
+        lite: bool,
+        /// Hierarchy level for PoNQ-lite (implies --lite).
+        #[arg(long, default_value_t = 0)]
+        coarsen: u32,
+        /// Skip the marching cubes baseline.
+        #[arg(long)]
+        no_mc: bool,
+        /// Network weights [default: the shipped model].
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Surface and sharp-edge samples per mesh for the metrics.
+        #[arg(long, default_value_t = 100_000)]
+        samples: usize,
+        /// Render the first K shapes side by side (ground truth, MC, PoNQ).
+        #[arg(long, default_value_t = 4)]
+        renders: usize,
+        /// Shapes evaluated in parallel [default: all cores].
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Report folder.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// No progress bar.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Marching cubes baseline: the zero level set of an SDF grid (.npy, nodes spanning the
     /// [-1,1]^3 box, negative inside, as written by `ponq-prep sdf`).
     Mc {
@@ -76,6 +120,33 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
+        Cmd::Run {
+            data,
+            split,
+            res,
+            lite,
+            coarsen,
+            no_mc,
+            model,
+            samples,
+            renders,
+            jobs,
+            output,
+            quiet,
+        } => run_split(RunArgs {
+            data,
+            split,
+            res,
+            lite: lite || coarsen > 0,
+            coarsen,
+            no_mc,
+            model,
+            samples,
+            renders,
+            jobs,
+            output,
+            quiet,
+        }),
         Cmd::Mc { sdf, output } => {
             let g = io::npy::read_npy_grid(&sdf).context("reading the SDF grid")?;
             let t = std::time::Instant::now();
@@ -183,4 +254,127 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+struct RunArgs {
+    data: PathBuf,
+    split: Option<PathBuf>,
+    res: Vec<usize>,
+    lite: bool,
+    coarsen: u32,
+    no_mc: bool,
+    model: Option<PathBuf>,
+    samples: usize,
+    renders: usize,
+    jobs: Option<usize>,
+    output: PathBuf,
+    quiet: bool,
+}
+
+fn run_split(a: RunArgs) -> Result<()> {
+    use indicatif::{ProgressBar, ProgressStyle};
+    use ponq_train::eval::{self, EvalOptions, Method};
+    use rayon::prelude::*;
+    if let Some(j) = a.jobs {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(j.max(1))
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
+    if a.res.is_empty() || a.res.iter().any(|&r| !(2..=512).contains(&r)) {
+        bail!("--res takes resolutions in 2..=512, got {:?}", a.res);
+    }
+    if a.samples == 0 {
+        bail!("--samples must be positive");
+    }
+    let device = ponq_model::backend::cpu();
+    let (net, cfg) = match &a.model {
+        Some(p) => ponq_model::weights::load(p, &device)?,
+        None => ponq_train::models::shipped(&device)?,
+    };
+    let (shapes, missing) = eval::inputs(&a.data, a.split.as_deref())?;
+    if shapes.is_empty() {
+        bail!("no shape of {} to evaluate", a.data.display());
+    }
+    let mut methods = vec![Method::Ponq];
+    if a.lite {
+        methods.push(Method::Lite);
+    }
+    if !a.no_mc {
+        methods.push(Method::Mc);
+    }
+    let opts = EvalOptions {
+        resolutions: a.res.clone(),
+        methods,
+        coarsen: a.coarsen,
+        samples: a.samples,
+        renders: a.renders,
+        tile: 48,
+    };
+    std::fs::create_dir_all(a.output.join("rows"))
+        .with_context(|| format!("cannot create {}", a.output.display()))?;
+    std::fs::create_dir_all(a.output.join("renders"))?;
+    let jobs: Vec<(usize, usize)> = (0..shapes.len())
+        .flat_map(|i| a.res.iter().map(move |&r| (i, r)))
+        .collect();
+    let pb = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        let pb = ProgressBar::new(jobs.len() as u64);
+        pb.set_style(
+            ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} (shape, grid) pairs [{elapsed} / ETA {eta}]",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        pb
+    };
+    let failed: Vec<(String, String)> = jobs
+        .par_iter()
+        .filter_map(|&(i, r)| {
+            let (id, path) = &shapes[i];
+            let rows_path = eval::rows_path(&a.output, id, r);
+            let result = if rows_path.is_file() {
+                Ok(())
+            } else {
+                let render = i < a.renders;
+                eval::evaluate(
+                    id,
+                    path,
+                    r,
+                    &net,
+                    cfg.encoder_layers,
+                    &opts,
+                    &device,
+                    render,
+                )
+                .and_then(|(rows, image)| {
+                    if let Some(im) = image {
+                        im.save_png(&a.output.join("renders").join(format!("{id}_{}.png", r + 1)))?;
+                    }
+                    eval::write_rows(&rows_path, &rows)
+                })
+            };
+            pb.inc(1);
+            result
+                .err()
+                .map(|e| (format!("{id}@{}", r + 1), format!("{e:#}")))
+        })
+        .collect();
+    pb.finish_and_clear();
+    let rows = eval::write_report(&a.output, &missing, &failed)?;
+    if !a.quiet {
+        print!("{}", eval::summary_markdown(&rows));
+        if !missing.is_empty() {
+            println!(
+                "{} shapes of the split are missing (listed in report.md)",
+                missing.len()
+            );
+        }
+        for (id, e) in &failed {
+            println!("failed: {id}: {e}");
+        }
+        println!("report: {}", a.output.join("report.md").display());
+    }
+    Ok(())
 }

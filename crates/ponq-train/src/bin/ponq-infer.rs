@@ -1,0 +1,242 @@
+//! `ponq-infer`: an SDF grid (`.npy`) in, a sharp watertight mesh out, with the trained
+//! PoNQ network.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+use ponq_mesh::{io, validity};
+use ponq_model::backend::{BackendKind, device};
+use ponq_train::infer::{InferOptions, infer};
+use ponq_train::models;
+
+/// Reconstruct a mesh from a signed distance grid (negative inside) with the PoNQ network:
+/// SDF grid -> network -> PoNQ -> Delaunay -> tags -> min cut -> mesh.
+///
+/// The output is closed, oriented, manifold and free of self-intersections (checked; exit
+/// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 empty
+/// surface (the SDF has no sign change; nothing is written).
+#[derive(Parser, Debug)]
+#[command(version, about, long_about)]
+struct Args {
+    /// SDF grid: a `.npy` array of rank 3, float32 or float64, C or Fortran order. Values are
+    /// signed distances in the units of --bounds, negative inside; cells must be cubes.
+    sdf: PathBuf,
+    /// Output mesh (`.obj`, `.ply` or `.off`).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// PoNQ-lite: one point per cell (quadrics of the cell summed).
+    #[arg(long)]
+    lite: bool,
+    /// Coarser hierarchy level: merge 2x2x2 blocks of cells K times (implies --lite).
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    coarsen: u32,
+    /// Open surface: drop triangles away from sharp, planar-like quadrics (threshold T on
+    /// the anisotropy lambda2/lambda1, default 0.35). The output then has a boundary.
+    #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
+    open: Option<f64>,
+    /// Network weights (`.bpk` with its `.json` config beside it) [default: the model
+    /// shipped in models/ and built into this program].
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// The authors' PyTorch weights (`pretrained_PoNQ_ABC.pt`) instead of --model.
+    #[arg(long, conflicts_with = "model")]
+    authors_weights: Option<PathBuf>,
+    /// Compute backend: flex (CPU, default) or wgpu (GPU; needs the `wgpu` cargo feature).
+    #[arg(long, default_value = "flex")]
+    backend: BackendKind,
+    /// Box spanned by the grid nodes: xmin,ymin,zmin,xmax,ymax,zmax [default: -1,-1,-1,1,1,1].
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X0,Y0,Z0,X1,Y1,Z1"
+    )]
+    bounds: Option<Vec<f64>>,
+    /// Also write the predicted PoNQ (points, normals, quadrics, v*) as `.npz`.
+    #[arg(long, value_name = "P.npz")]
+    save_ponq: Option<PathBuf>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Cells per side of a network tile (the kept core; tiles overlap by the encoder's
+    /// reach so the result equals one pass over the whole grid). Bounds peak memory.
+    #[arg(long, default_value_t = 48)]
+    tile: usize,
+    /// Skip the validity check of the output.
+    #[arg(long)]
+    no_check: bool,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+enum Outcome {
+    Valid,
+    Invalid,
+    Empty,
+}
+
+fn run(args: &Args) -> Result<Outcome> {
+    if let Some(t) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t.max(1))
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
+    if let Some(t) = args.open {
+        if !(t > 0.0 && t <= 1.0) {
+            bail!("--open threshold must be in (0, 1], got {t}");
+        }
+    }
+    let ext = args
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("obj" | "ply" | "off")) {
+        bail!(
+            "the output must end in .obj, .ply or .off: {}",
+            args.output.display()
+        );
+    }
+    let bounds = match &args.bounds {
+        None => ([-1.0; 3], [1.0; 3]),
+        Some(b) if b.len() == 6 => ([b[0], b[1], b[2]], [b[3], b[4], b[5]]),
+        Some(b) => bail!(
+            "--bounds needs 6 comma-separated numbers xmin,ymin,zmin,xmax,ymax,zmax, got {b:?}"
+        ),
+    };
+    let dev = device(args.backend).map_err(anyhow::Error::msg)?;
+    let t = Instant::now();
+    let grid = io::npy::read_npy_grid(&args.sdf)
+        .with_context(|| format!("cannot read the SDF grid {}", args.sdf.display()))?;
+    let read_time = t.elapsed();
+    let (net, net_cfg, authors) = match (&args.model, &args.authors_weights) {
+        (_, Some(pt)) => {
+            let cfg = ponq_model::PonqNetConfig::new();
+            (
+                ponq_model::weights::load_authors_state_dict(pt, &cfg, &dev)?,
+                cfg,
+                true,
+            )
+        }
+        (Some(p), None) => {
+            let (n, c) = ponq_model::weights::load(p, &dev)?;
+            (n, c, false)
+        }
+        (None, None) => {
+            let (n, c) = models::shipped(&dev)?;
+            (n, c, false)
+        }
+    };
+    let opts = InferOptions {
+        bounds,
+        tile: args.tile,
+        lite: args.lite,
+        coarsen: args.coarsen,
+        open: args.open,
+        authors_cell_base: authors,
+        ..Default::default()
+    };
+    let pb = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        let pb = ProgressBar::new(1);
+        pb.set_style(
+            ProgressStyle::with_template("network {bar:30} {pos}/{len} tiles [{elapsed}]")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        pb
+    };
+    let res = match infer(
+        &net,
+        net_cfg.encoder_layers,
+        &grid,
+        &opts,
+        &dev,
+        |done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        },
+    ) {
+        Ok(r) => r,
+        Err(e) if e.to_string().contains("no sign change") => {
+            pb.finish_and_clear();
+            eprintln!("error: {e:#}");
+            return Ok(Outcome::Empty);
+        }
+        Err(e) => return Err(e),
+    };
+    pb.finish_and_clear();
+    let t = Instant::now();
+    io::write_mesh(&args.output, &res.mesh).context("writing the mesh")?;
+    if let Some(p) = &args.save_ponq {
+        io::npz::write_ponq(p, &res.ponq).context("writing the PoNQ")?;
+    }
+    let write_time = t.elapsed();
+    let report = (!args.no_check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
+    if !args.quiet {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        let s = &res.meshing;
+        println!(
+            "{}: grid {:?} -> {} cells kept, {} points -> {} V, {} F",
+            args.output.display(),
+            grid.dims,
+            res.kept_cells,
+            res.ponq.len(),
+            res.mesh.vertices.len(),
+            res.mesh.faces.len()
+        );
+        if let Some(m) = &res.message {
+            println!("note: {m}");
+        }
+        println!(
+            "time (ms): read {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}), write {:.1}",
+            ms(read_time),
+            ms(res.times.network),
+            res.tiles,
+            ms(res.times.convert),
+            ms(res.times.meshing),
+            ms(s.times.delaunay),
+            ms(s.times.tagging),
+            ms(s.times.cut),
+            ms(s.times.manifold),
+            ms(s.times.extraction),
+            ms(write_time)
+        );
+        if let Some(r) = &report {
+            println!("validity: {r}");
+        }
+    }
+    Ok(match &report {
+        None => Outcome::Valid,
+        Some(r) => {
+            let ok = if args.open.is_some() {
+                r.self_intersections == 0 && r.nonmanifold_edges == 0
+            } else {
+                r.is_valid()
+            };
+            if ok { Outcome::Valid } else { Outcome::Invalid }
+        }
+    })
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    match run(&args) {
+        Ok(Outcome::Valid) => ExitCode::SUCCESS,
+        Ok(Outcome::Invalid) => {
+            eprintln!("error: the output mesh failed the validity check (see above)");
+            ExitCode::from(3)
+        }
+        Ok(Outcome::Empty) => ExitCode::from(4),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,367 @@
+//! `ponq-infer` end to end (shipped model), tiling exactness, bad inputs; `ponq-eval run`
+//! on a tiny split against direct metric calls.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use ponq_mesh::io::npy::{Grid3, write_npy_grid_f32};
+use ponq_model::{PonqNetConfig, backend};
+use ponq_train::infer::{Frame, predict_tiled};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ponq-infer-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// SDF of a box of half-sizes `h` rotated about z by `angle`, on `n` cells over `[-1,1]^3`.
+fn box_grid(n: usize, h: [f64; 3], angle: f64) -> Grid3 {
+    let m = n + 1;
+    let (c, s) = (angle.cos(), angle.sin());
+    let mut v = Vec::with_capacity(m * m * m);
+    for i in 0..m {
+        for j in 0..m {
+            for k in 0..m {
+                let p = [i, j, k].map(|t| -1.0 + 2.0 * t as f64 / n as f64);
+                let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1], p[2]];
+                let d: [f64; 3] = std::array::from_fn(|a| q[a].abs() - h[a]);
+                let out = d.iter().map(|x| x.max(0.0).powi(2)).sum::<f64>().sqrt();
+                let inside = d.iter().cloned().fold(f64::MIN, f64::max).min(0.0);
+                v.push(out + inside);
+            }
+        }
+    }
+    Grid3::new([m; 3], v).unwrap()
+}
+
+fn infer_exe() -> &'static str {
+    env!("CARGO_BIN_EXE_ponq-infer")
+}
+
+#[test]
+fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
+    let d = tmp("box");
+    let g = box_grid(16, [0.5, 0.35, 0.4], 0.3);
+    write_npy_grid_f32(d.join("box.npy"), &g).unwrap();
+    for extra in [vec![], vec!["--lite"], vec!["--tile", "5"]] {
+        let o = Command::new(infer_exe())
+            .arg(d.join("box.npy"))
+            .arg("-o")
+            .arg(d.join("box.obj"))
+            .args(&extra)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{extra:?}: {}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let m = ponq_mesh::io::read_mesh(d.join("box.obj")).unwrap();
+        let r = ponq_mesh::validity::check(&m);
+        assert!(r.is_valid(), "{extra:?}: {r}");
+        // The surface lies near the box: every vertex within 1.5 cells of it.
+        let cell = 2.0 / 16.0;
+        let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+        for v in &m.vertices {
+            let q = [c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]];
+            let h = [0.5, 0.35, 0.4];
+            let dd: [f64; 3] = std::array::from_fn(|a| q[a].abs() - h[a]);
+            let out = dd.iter().map(|x| x.max(0.0).powi(2)).sum::<f64>().sqrt();
+            let inside = dd.iter().cloned().fold(f64::MIN, f64::max).min(0.0);
+            assert!(
+                (out + inside).abs() < 1.5 * cell,
+                "{extra:?}: vertex {v:?} at distance {}",
+                out + inside
+            );
+        }
+    }
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn tiles_give_the_same_prediction_as_one_pass() {
+    let dev = backend::cpu();
+    let net = PonqNetConfig::new()
+        .with_width(8)
+        .with_points_per_cell(2)
+        .with_encoder_layers(2)
+        .with_decoder_blocks(1)
+        .init(&dev);
+    let g = box_grid(11, [0.5, 0.4, 0.3], 0.2);
+    let frame = Frame::of(&g, ([-1.0; 3], [1.0; 3])).unwrap();
+    let input: Vec<f32> = g.data.iter().map(|&v| v as f32 * 11.0 / 32.0).collect();
+    let (whole, t1) = predict_tiled(&net, &input, &frame, 2, 64, false, &dev, |_, _| {}).unwrap();
+    let (tiled, t2) = predict_tiled(&net, &input, &frame, 2, 4, false, &dev, |_, _| {}).unwrap();
+    assert_eq!(t1, 1);
+    assert_eq!(t2, 27);
+    for (name, a, b) in [
+        ("points", &whole.points, &tiled.points),
+        ("cholesky", &whole.cholesky, &tiled.cholesky),
+        ("occupancy", &whole.occupancy, &tiled.occupancy),
+    ] {
+        let worst = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max);
+        assert!(worst < 1e-4, "{name}: tiles differ by {worst}");
+    }
+    // A margin smaller than the encoder's reach changes the border cells of tiles.
+    let (short, _) = predict_tiled(&net, &input, &frame, 0, 4, false, &dev, |_, _| {}).unwrap();
+    assert!(
+        whole
+            .occupancy
+            .iter()
+            .zip(&short.occupancy)
+            .any(|(x, y)| (x - y).abs() > 1e-4)
+    );
+}
+
+fn run_infer(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
+    let o = Command::new(infer_exe()).args(args).output().unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn infer_rejects_bad_input_with_clear_errors() {
+    let d = tmp("bad");
+    let out = d.join("o.obj");
+    let os = |p: &Path| p.as_os_str().to_owned();
+    let o = os(&out);
+    // Not a .npy file; truncated; wrong rank.
+    std::fs::write(d.join("text.npy"), "hello").unwrap();
+    let good = box_grid(8, [0.5; 3], 0.0);
+    write_npy_grid_f32(d.join("good.npy"), &good).unwrap();
+    let bytes = std::fs::read(d.join("good.npy")).unwrap();
+    std::fs::write(d.join("trunc.npy"), &bytes[..bytes.len() / 2]).unwrap();
+    let cases: Vec<(PathBuf, &str)> = vec![
+        (d.join("missing.npy"), "cannot read"),
+        (d.join("text.npy"), "cannot read"),
+        (d.join("trunc.npy"), "cannot read"),
+    ];
+    for (p, msg) in &cases {
+        let (code, err) = run_infer(&[&os(p), "-o".as_ref(), &o]);
+        assert_eq!(code, Some(2), "{p:?}: {err}");
+        assert!(err.contains(msg), "{p:?}: {err}");
+    }
+    // NaN, a grid too small, no sign change, non-cubic cells.
+    // The writer refuses NaN, so patch one f32 of the data block (little-endian) by hand.
+    let mut nan_bytes = bytes.clone();
+    let data_start = nan_bytes.len() - 4 * good.data.len();
+    nan_bytes[data_start + 400..data_start + 404].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(d.join("nan.npy"), &nan_bytes).unwrap();
+    nan_bytes[data_start + 400..data_start + 404].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
+    std::fs::write(d.join("inf.npy"), &nan_bytes).unwrap();
+    write_npy_grid_f32(
+        d.join("tiny.npy"),
+        &Grid3::new([1, 2, 2], vec![-1.0, 1.0, 1.0, 1.0]).unwrap(),
+    )
+    .unwrap();
+    let mut pos = good.clone();
+    pos.data.iter_mut().for_each(|v| *v = v.abs() + 0.1);
+    write_npy_grid_f32(d.join("pos.npy"), &pos).unwrap();
+    for (name, code_want, msg) in [
+        ("nan.npy", 2, "is NaN"),
+        ("inf.npy", 2, "is -inf"),
+        ("tiny.npy", 2, "at least 2 nodes"),
+        ("pos.npy", 4, "no sign change"),
+    ] {
+        let (code, err) = run_infer(&[&os(&d.join(name)), "-o".as_ref(), &o]);
+        assert_eq!(code, Some(code_want), "{name}: {err}");
+        assert!(err.contains(msg), "{name}: {err}");
+    }
+    assert!(!out.exists(), "nothing is written on errors");
+    let (code, err) = run_infer(&[
+        &os(&d.join("good.npy")),
+        "-o".as_ref(),
+        &o,
+        "--bounds".as_ref(),
+        "-1,-1,-1,1,1,3".as_ref(),
+    ]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("not cubes"), "{err}");
+    let (code, err) = run_infer(&[
+        &os(&d.join("good.npy")),
+        "-o".as_ref(),
+        &o,
+        "--bounds".as_ref(),
+        "-1,-1,-1,1,1".as_ref(),
+    ]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("6 comma-separated"), "{err}");
+    assert!(!out.exists(), "nothing is written on errors");
+    let (code, _) = run_infer(&[
+        &os(&d.join("good.npy")),
+        "-o".as_ref(),
+        &os(&d.join("o.xyz")),
+    ]);
+    assert_eq!(code, Some(2));
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn eval_run_matches_direct_metric_calls() {
+    let d = tmp("eval");
+    let data = d.join("data");
+    // Shapes in sub-folders are found too.
+    std::fs::create_dir_all(data.join("cad")).unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    std::fs::copy(root.join("examples/csg.obj"), data.join("cad/csg.obj")).unwrap();
+    std::fs::write(d.join("split.txt"), "csg\nnot_here\n").unwrap();
+    // A tiny network keeps the test fast; the numbers checked are MC's and the summary's.
+    let dev = backend::cpu();
+    let cfg = PonqNetConfig::new()
+        .with_width(8)
+        .with_points_per_cell(2)
+        .with_encoder_layers(1)
+        .with_decoder_blocks(1);
+    ponq_model::weights::save(&cfg.init(&dev), &cfg, &d.join("net.bpk")).unwrap();
+    let report = d.join("report");
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
+            .args([
+                "run",
+                "--res",
+                "8",
+                "--samples",
+                "3000",
+                "--renders",
+                "1",
+                "--jobs",
+                "1",
+                "-q",
+                "--data",
+            ])
+            .arg(&data)
+            .arg("--split")
+            .arg(d.join("split.txt"))
+            .arg("--model")
+            .arg(d.join("net.bpk"))
+            .arg("-o")
+            .arg(&report)
+            .output()
+            .unwrap()
+    };
+    let o = run();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(report.join("per_shape.csv")).unwrap();
+    let rows: Vec<ponq_train::eval::Row> = csv
+        .lines()
+        .skip(1)
+        .map(|l| ponq_train::eval::Row::parse(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), 2, "PoNQ and MC for one shape");
+    let mc = rows.iter().find(|r| r.method == "MC").unwrap();
+    // Direct calls: normalise, SDF grid, marching cubes, metrics with the same samples.
+    let gt = ponq_mesh::io::read_mesh(data.join("cad/csg.obj")).unwrap();
+    let gt = ponq_data::normalize::Normalization::of(&gt)
+        .unwrap()
+        .apply_mesh(&gt);
+    let g = ponq_data::sdf::MeshSdf::new(&gt)
+        .unwrap()
+        .grid(8, |_| {})
+        .unwrap();
+    let v: Vec<f64> = g.values.iter().map(|&x| f64::from(x)).collect();
+    let m = ponq_mesh::marching_cubes::marching_cubes(&v, [9; 3], [-1.0; 3], [1.0; 3]).unwrap();
+    let opts = ponq_mesh::metrics::MetricOptions {
+        surface_samples: 3000,
+        edge_samples: 3000,
+        check_validity: false,
+        ..Default::default()
+    };
+    let want = ponq_mesh::metrics::compare(&m, &gt, &opts);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+    assert!(
+        close(mc.cd, want.cd_x1e5) && close(mc.f1, want.f1) && close(mc.nc, want.nc),
+        "{mc:?} vs {want:?}"
+    );
+    assert!(
+        close(mc.ecd, want.ecd_x1e2) && close(mc.ef1, want.ef1),
+        "{mc:?} vs {want:?}"
+    );
+    assert_eq!((mc.vertices, mc.faces), (m.vertices.len(), m.faces.len()));
+    assert_eq!(mc.watertight, ponq_mesh::validity::check(&m).is_valid());
+    let ponq = rows.iter().find(|r| r.method == "PoNQ").unwrap();
+    assert!(ponq.faces == 0 || ponq.watertight, "{ponq:?}");
+    // The summary's MC line shows the same numbers (one shape: mean = value).
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    let line = summary.lines().find(|l| l.starts_with("| MC |")).unwrap();
+    assert!(
+        line.contains(&format!("| {:.3} | {:.3} | {:.3} |", mc.cd, mc.f1, mc.nc)),
+        "{line}"
+    );
+    let rep = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(rep.contains("not_here"), "missing ids are listed");
+    assert!(report.join("renders/csg_9.png").is_file());
+    // Resumable: a second run reuses the rows (same file content).
+    let o = run();
+    assert!(o.status.success());
+    assert_eq!(
+        std::fs::read_to_string(report.join("per_shape.csv")).unwrap(),
+        csv
+    );
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn built_in_model_equals_the_shipped_file() {
+    let dev = backend::cpu();
+    let here = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/ponq-cpu.bpk");
+    let (file_net, file_cfg) = ponq_model::weights::load(&here, &dev).unwrap();
+    let (emb_net, emb_cfg) = ponq_train::models::embedded(&dev).unwrap();
+    assert_eq!(file_cfg.width, emb_cfg.width);
+    assert_eq!(file_cfg.encoder_layers, emb_cfg.encoder_layers);
+    let g = box_grid(6, [0.5, 0.4, 0.3], 0.1);
+    let frame = Frame::of(&g, ([-1.0; 3], [1.0; 3])).unwrap();
+    let input: Vec<f32> = g.data.iter().map(|&v| v as f32 * 6.0 / 32.0).collect();
+    let (a, _) = predict_tiled(
+        &file_net,
+        &input,
+        &frame,
+        file_cfg.encoder_layers,
+        64,
+        false,
+        &dev,
+        |_, _| {},
+    )
+    .unwrap();
+    let (b, _) = predict_tiled(
+        &emb_net,
+        &input,
+        &frame,
+        emb_cfg.encoder_layers,
+        64,
+        false,
+        &dev,
+        |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(a.points, b.points);
+    assert_eq!(a.occupancy, b.occupancy);
+}
+
+#[test]
+fn eval_inputs_are_found_recursively_and_ids_must_be_unique() {
+    let d = tmp("inputs");
+    std::fs::create_dir_all(d.join("a/b")).unwrap();
+    std::fs::create_dir_all(d.join("c")).unwrap();
+    for f in ["a/one.obj", "a/b/two.ply", "c/three.npz", "c/notes.txt"] {
+        std::fs::write(d.join(f), "").unwrap();
+    }
+    std::fs::write(d.join("split.txt"), "one\nthree\nfour\n").unwrap();
+    let (files, missing) = ponq_train::eval::inputs(&d, Some(&d.join("split.txt"))).unwrap();
+    let ids: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
+    assert_eq!(ids, ["one", "three"]);
+    assert_eq!(missing, ["four"]);
+    let (all, _) = ponq_train::eval::inputs(&d, None).unwrap();
+    assert_eq!(all.len(), 3);
+    std::fs::write(d.join("c/one.stl"), "").unwrap();
+    let err = ponq_train::eval::inputs(&d, None).unwrap_err().to_string();
+    assert!(err.contains("two shapes with the id \"one\""), "{err}");
+    std::fs::remove_dir_all(&d).ok();
+}

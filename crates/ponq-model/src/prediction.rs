@@ -60,7 +60,7 @@ impl Prediction {
                 "batch index {b} >= batch size {batch}"
             )));
         }
-        let take4 = |t: &burn::Tensor<4>| to_vec(t.clone().slice([b..b + 1]));
+        let take4 = |t: &burn::Tensor<4>| to_vec(t.clone().narrow(0, b, 1));
         let pred = Self {
             cells: out.cells,
             points_per_cell: p,
@@ -68,7 +68,7 @@ impl Prediction {
             vstars: take4(&out.vstars)?,
             normals: take4(&out.normals)?,
             cholesky: take4(&out.cholesky)?,
-            occupancy: to_vec(out.occupancy.clone().slice([b..b + 1]))?,
+            occupancy: to_vec(out.occupancy.clone().narrow(0, b, 1))?,
         };
         debug_assert_eq!(pred.occupancy.len(), c);
         Ok(pred)

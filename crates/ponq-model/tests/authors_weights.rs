@@ -183,9 +183,7 @@ fn authors_state_dict_loads_every_parameter_in_place() {
     // A state dict with a missing tensor is refused with a message.
     let short = dir.join("short.pt");
     write_pt(&short, &keys[..keys.len() - 1]);
-    let e = weights::load_authors_state_dict(&short, &cfg, &dev)
-        .err()
-        .expect("refused");
+    let e = weights::load_authors_state_dict(&short, &cfg, &dev).expect_err("refused");
     assert!(
         e.to_string().contains("decoder_occupancy") || e.to_string().contains("missing"),
         "{e}"

@@ -197,14 +197,8 @@ impl TrainConfig {
         let mut c: TrainConfig =
             toml::from_str(&text).with_context(|| format!("invalid config {}", path.display()))?;
         let base = path.parent().unwrap_or(Path::new("."));
-        let rel = |p: &Path| {
-            if p.is_relative() {
-                base.join(p)
-            } else {
-                p.to_path_buf()
-            }
-        };
-        c.data.dir = rel(&c.data.dir);
+        let rel = |p: &Path| base.join(p); // `join` keeps absolute paths as they are
+        c.data.dir = base.join(&c.data.dir);
         c.data.split = c.data.split.as_deref().map(rel);
         c.train.init_from = c.train.init_from.as_deref().map(rel);
         c.check()?;

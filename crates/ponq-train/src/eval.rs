@@ -142,7 +142,7 @@ const MESH_EXT: [&str; 4] = ["obj", "ply", "off", "stl"];
 
 /// The shapes to evaluate: files of `data` (meshes, or `.npz` / `.hdf5` records) sorted by
 /// name, restricted to a split's ids when given; also returns the split ids with no file.
-pub fn inputs(data: &Path, split: Option<&Path>) -> Result<(Vec<(String, PathBuf)>, Vec<String>)> {
+pub fn inputs(data: &Path, split: Option<&Path>) -> Result<(Vec<Shape>, Vec<String>)> {
     let is_shape = |p: &Path| {
         p.extension()
             .and_then(|e| e.to_str())
@@ -307,8 +307,13 @@ fn metrics(pred: &TriMesh, t: &Truth, samples: usize) -> (f64, f64, f64, f64, f6
     )
 }
 
+/// A shape to evaluate: its id (the file stem) and its file.
+pub type Shape = (String, PathBuf);
+
 /// Evaluates one shape at one resolution; returns its rows and, when `render` is set, the
 /// side-by-side image (ground truth or nothing, marching cubes, PoNQ).
+// The arguments are independent inputs of one evaluation (shape, grid, network, options).
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     id: &str,
     path: &Path,

@@ -172,6 +172,8 @@ fn ponq_to_user(p: &Ponq, f: &Frame) -> Result<Ponq> {
 
 /// Runs the network over `grid` (normalised values, already scaled for the network) in
 /// tiles; returns the prediction over all cells and the number of tiles.
+// Grid, network, tiling and device are independent inputs; a struct would only rename them.
+#[allow(clippy::too_many_arguments)]
 pub fn predict_tiled(
     net: &PonqNet,
     input: &[f32],

@@ -32,7 +32,7 @@ enum Cmd {
     /// resolution; writes OUT/per_shape.csv, OUT/summary.md (the paper's table layout),
     /// OUT/report.md with renders in OUT/renders/. Resumable: rerun the same command.
     Run {
-        /// Folder of shapes: meshes (.obj/.ply/.off/.stl; their SDF grids are made here),
+        /// Folder of shapes, searched recursively: meshes (.obj/.ply/.off/.stl; their SDF grids are made here),
         /// our .npz records or the authors' .hdf5 files (metrics from their samples; no
         /// edge metrics without a mesh).
         #[arg(long)]

@@ -31,47 +31,7 @@ enum Cmd {
     /// Evaluate a split: every shape through PoNQ (and PoNQ-lite) and marching cubes at each
     /// resolution; writes OUT/per_shape.csv, OUT/summary.md (the paper's table layout),
     /// OUT/report.md with renders in OUT/renders/. Resumable: rerun the same command.
-    Run {
-        /// Folder of shapes, searched recursively: meshes (.obj/.ply/.off/.stl; their SDF grids are made here),
-        /// our .npz records or the authors' .hdf5 files (metrics from their samples; no
-        /// edge metrics without a mesh).
-        #[arg(long)]
-        data: PathBuf,
-        /// Split file (one id = file stem per line), e.g. configs/splits/abc_test.txt;
-        /// ids without a file are listed in the report, not fatal.
-        #[arg(long)]
-        split: Option<PathBuf>,
-        /// Grid resolutions (cells per side), comma-separated.
-        #[arg(long, value_delimiter = ',', default_value = "32")]
-        res: Vec<usize>,
-        /// Also evaluate PoNQ-lite.
-        #[arg(long)]
-        lite: bool,
-        /// Hierarchy level for PoNQ-lite (implies --lite).
-        #[arg(long, default_value_t = 0)]
-        coarsen: u32,
-        /// Skip the marching cubes baseline.
-        #[arg(long)]
-        no_mc: bool,
-        /// Network weights [default: the shipped model].
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Surface and sharp-edge samples per mesh for the metrics.
-        #[arg(long, default_value_t = 100_000)]
-        samples: usize,
-        /// Render the first K shapes side by side (ground truth, MC, PoNQ).
-        #[arg(long, default_value_t = 4)]
-        renders: usize,
-        /// Shapes evaluated in parallel [default: all cores].
-        #[arg(long)]
-        jobs: Option<usize>,
-        /// Report folder.
-        #[arg(short, long)]
-        output: PathBuf,
-        /// No progress bar.
-        #[arg(short, long)]
-        quiet: bool,
-    },
+    Run(RunArgs),
     /// Marching cubes baseline: the zero level set of an SDF grid (.npy, nodes spanning the
     /// [-1,1]^3 box, negative inside, as written by `ponq-prep sdf`).
     Mc {
@@ -120,33 +80,7 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Run {
-            data,
-            split,
-            res,
-            lite,
-            coarsen,
-            no_mc,
-            model,
-            samples,
-            renders,
-            jobs,
-            output,
-            quiet,
-        } => run_split(RunArgs {
-            data,
-            split,
-            res,
-            lite: lite || coarsen > 0,
-            coarsen,
-            no_mc,
-            model,
-            samples,
-            renders,
-            jobs,
-            output,
-            quiet,
-        }),
+        Cmd::Run(a) => run_split(a),
         Cmd::Mc { sdf, output } => {
             let g = io::npy::read_npy_grid(&sdf).context("reading the SDF grid")?;
             let t = std::time::Instant::now();
@@ -256,18 +190,47 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Flags of `ponq-eval run`.
+#[derive(clap::Args, Debug)]
 struct RunArgs {
+    /// Folder of shapes, searched recursively: meshes (.obj/.ply/.off/.stl; their SDF grids are made here),
+    /// our .npz records or the authors' .hdf5 files (metrics from their samples; no
+    /// edge metrics without a mesh).
+    #[arg(long)]
     data: PathBuf,
+    /// Split file (one id = file stem per line), e.g. configs/splits/abc_test.txt;
+    /// ids without a file are listed in the report, not fatal.
+    #[arg(long)]
     split: Option<PathBuf>,
+    /// Grid resolutions (cells per side), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "32")]
     res: Vec<usize>,
+    /// Also evaluate PoNQ-lite.
+    #[arg(long)]
     lite: bool,
+    /// Hierarchy level for PoNQ-lite (implies --lite).
+    #[arg(long, default_value_t = 0)]
     coarsen: u32,
+    /// Skip the marching cubes baseline.
+    #[arg(long)]
     no_mc: bool,
+    /// Network weights [default: the shipped model].
+    #[arg(long)]
     model: Option<PathBuf>,
+    /// Surface and sharp-edge samples per mesh for the metrics.
+    #[arg(long, default_value_t = 100_000)]
     samples: usize,
+    /// Render the first K shapes side by side (ground truth, MC, PoNQ).
+    #[arg(long, default_value_t = 4)]
     renders: usize,
+    /// Shapes evaluated in parallel [default: all cores].
+    #[arg(long)]
     jobs: Option<usize>,
+    /// Report folder.
+    #[arg(short, long)]
     output: PathBuf,
+    /// No progress bar.
+    #[arg(short, long)]
     quiet: bool,
 }
 
@@ -297,7 +260,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         bail!("no shape of {} to evaluate", a.data.display());
     }
     let mut methods = vec![Method::Ponq];
-    if a.lite {
+    if a.lite || a.coarsen > 0 {
         methods.push(Method::Lite);
     }
     if !a.no_mc {

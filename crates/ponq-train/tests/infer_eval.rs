@@ -77,6 +77,18 @@ fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
             );
         }
     }
+    // --open: boundary edges are allowed, self-intersections and non-manifold edges are not.
+    let o = Command::new(infer_exe())
+        .arg(d.join("box.npy"))
+        .arg("-o")
+        .arg(d.join("open.obj"))
+        .args(["--open", "0.35"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m = ponq_mesh::io::read_mesh(d.join("open.obj")).unwrap();
+    let r = ponq_mesh::validity::check(&m);
+    assert!(r.self_intersections == 0 && r.nonmanifold_edges == 0, "{r}");
     std::fs::remove_dir_all(&d).ok();
 }
 

@@ -209,7 +209,14 @@ fn run(args: &Args) -> Result<Outcome> {
             ms(write_time)
         );
         if let Some(r) = &report {
-            println!("validity: {r}");
+            if args.open.is_some() {
+                // An open surface passes with boundary edges (and the vertices on them).
+                println!(
+                    "validity (open surface: boundary edges expected; needs no self-intersection, no non-manifold edge): {r}"
+                );
+            } else {
+                println!("validity: {r}");
+            }
         }
     }
     Ok(match &report {

@@ -8,6 +8,23 @@
 //! six losses; [`train`] runs AdamW with gradient clipping, validation, checkpoints and
 //! `metrics.csv` / [`plot`]. [`config`] is the TOML file of a run (`configs/*.toml`).
 //!
+//! Inference (`ponq-infer`): [`infer`] runs the network over an SDF grid in exact tiles and
+//! meshes the prediction (SDF grid -> network -> PoNQ -> Delaunay -> tags -> min cut -> mesh);
+//! [`models`] is the shipped model. Evaluation (`ponq-eval run`): [`eval`] reconstructs shapes
+//! with PoNQ and marching cubes, scores them and writes the report ([`render`] draws it).
+//!
+//! ```no_run
+//! use ponq_train::{infer, models};
+//! let device = ponq_model::backend::cpu();
+//! let (net, cfg) = models::shipped(&device).unwrap();
+//! let grid = ponq_mesh::io::npy::read_npy_grid("examples/csg_sdf_33.npy").unwrap();
+//! let opts = infer::InferOptions::default();
+//! let out = infer::infer(&net, cfg.encoder_layers, &grid, &opts, &device, |_, _| {}).unwrap();
+//! println!("{} faces", out.mesh.faces.len());
+//! ```
+//!
+//! Training:
+//!
 //! ```no_run
 //! use ponq_train::{config::TrainConfig, train};
 //! let cfg = TrainConfig::load("configs/smoke.toml".as_ref()).unwrap();

@@ -1,5 +1,6 @@
 //! Delaunay benchmark: random points in a cube and exact lattices (all co-spherical).
-//! `cargo bench -p ponq-mesh --bench delaunay_bench`
+//! `cargo bench -p ponq-mesh --bench delaunay_bench` (one worker, then one per rayon thread;
+//! `RAYON_NUM_THREADS` sets how many).
 
 use ponq_mesh::delaunay::Delaunay;
 use std::time::Instant;
@@ -12,22 +13,32 @@ fn main() {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
-    println!("| input | points | tets | time (ms) | us / point |");
-    println!("|---|---:|---:|---:|---:|");
+    let threads = rayon::current_num_threads();
+    println!(
+        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|");
     let row = |name: &str, pts: &[[f64; 3]]| {
-        let mut best = f64::MAX;
-        let mut tets = 0;
-        for _ in 0..3 {
-            let t = Instant::now();
-            let dt = Delaunay::new(pts).expect("finite points");
-            best = best.min(t.elapsed().as_secs_f64());
-            tets = dt.tets.len();
-        }
+        let time = |workers: usize| {
+            let mut best = f64::MAX;
+            let mut tets = 0;
+            for _ in 0..5 {
+                let t = Instant::now();
+                let dt = Delaunay::with_threads(pts, workers).expect("finite points");
+                best = best.min(t.elapsed().as_secs_f64());
+                tets = dt.tets.len();
+            }
+            (best, tets)
+        };
+        let (one, tets) = time(1);
+        let (all, _) = time(threads);
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} |",
             pts.len(),
-            best * 1e3,
-            best * 1e6 / pts.len() as f64
+            one * 1e3,
+            one * 1e6 / pts.len() as f64,
+            all * 1e3,
+            all * 1e6 / pts.len() as f64
         );
     };
     for n in [10_000usize, 100_000, 400_000] {

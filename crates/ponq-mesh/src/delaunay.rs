@@ -15,6 +15,9 @@
 //! assert_eq!(dt.tets.len(), 2);
 //! ```
 
+use std::sync::atomic::AtomicU32;
+use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
+
 use crate::error::{Error, Result};
 use crate::predicates::{in_conflict_bounded, orient3d, static_insphere_bound};
 
@@ -92,8 +95,20 @@ fn hilbert_index(mut x: [u32; 3], bits: u32) -> u64 {
 }
 
 /// Biased randomised insertion order: rounds of doubling size, each sorted along a Hilbert curve.
-fn brio_order(pts: &[[f64; 3]], lo: [f64; 3], hi: [f64; 3]) -> Vec<u32> {
+/// Returns the order and the start of each round, ascending, followed by `pts.len()`.
+fn brio_order(pts: &[[f64; 3]]) -> (Vec<u32>, Vec<usize>) {
     const BITS: u32 = 16;
+    let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
+    if let Some(first) = pts.first() {
+        lo = *first;
+        hi = *first;
+    }
+    for p in pts {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
     let scale: Vec<f64> = (0..3)
         .map(|k| {
             let e = hi[k] - lo[k];
@@ -115,12 +130,15 @@ fn brio_order(pts: &[[f64; 3]], lo: [f64; 3], hi: [f64; 3]) -> Vec<u32> {
         order.swap(i, j);
     }
     let mut end = order.len();
+    let mut rounds = vec![end];
     while end > 0 {
         let start = if end <= 64 { 0 } else { end / 2 };
         order[start..end].sort_by_cached_key(|&i| key(&pts[i as usize]));
+        rounds.push(start);
         end = start;
     }
-    order
+    rounds.reverse();
+    (order, rounds)
 }
 
 impl Delaunay {
@@ -130,6 +148,16 @@ impl Delaunay {
     /// # Errors
     /// [`Error::InvalidInput`] for a non-finite coordinate or more than 2^31 points.
     pub fn new(points: &[[f64; 3]]) -> Result<Self> {
+        Self::with_threads(points, rayon::current_num_threads())
+    }
+
+    /// [`Delaunay::new`] with at most `threads` worker threads (of the current rayon pool).
+    /// The result does not depend on `threads`: the symbolically perturbed Delaunay
+    /// triangulation is unique, so every insertion order gives the same tets.
+    ///
+    /// # Errors
+    /// As [`Delaunay::new`].
+    pub fn with_threads(points: &[[f64; 3]], threads: usize) -> Result<Self> {
         if points.len() >= (1usize << 31) - 8 {
             return Err(Error::InvalidInput(format!(
                 "{} points is more than the triangulation supports",
@@ -145,10 +173,12 @@ impl Delaunay {
         // Merge exact duplicates.
         let mut idx: Vec<u32> = (0..points.len() as u32).collect();
         idx.sort_unstable_by(|&a, &b| {
+            // `+ 0.0` turns -0.0 into 0.0: the same position must sort as one key.
             let (p, q) = (&points[a as usize], &points[b as usize]);
-            p[0].total_cmp(&q[0])
-                .then(p[1].total_cmp(&q[1]))
-                .then(p[2].total_cmp(&q[2]))
+            (p[0] + 0.0)
+                .total_cmp(&(q[0] + 0.0))
+                .then((p[1] + 0.0).total_cmp(&(q[1] + 0.0)))
+                .then((p[2] + 0.0).total_cmp(&(q[2] + 0.0)))
                 .then(a.cmp(&b))
         });
         let mut vertex_of_point = vec![0u32; points.len()];
@@ -175,7 +205,21 @@ impl Delaunay {
             }
             vertex_of_point[i] = group_vertex[g];
         }
-        let mut dt = Builder::new(vertices).run();
+        // Number the vertices in insertion order inside the builder, so that consecutive
+        // insertions touch neighbouring memory; `finish` maps the numbers back.
+        let (order, rounds) = brio_order(&vertices);
+        let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
+        let mut dt = Builder::new(sorted, order.clone()).run(&rounds, threads);
+        let mut back = vec![0u32; order.len()];
+        for (new, &old) in order.iter().enumerate() {
+            back[new] = old;
+        }
+        for tet in &mut dt.tets {
+            for v in tet.iter_mut() {
+                *v = back[*v as usize];
+            }
+        }
+        dt.vertices = vertices;
         dt.vertex_of_point = vertex_of_point;
         Ok(dt)
     }
@@ -192,14 +236,51 @@ impl Delaunay {
     }
 }
 
-/// A tet of the builder: vertices, neighbours and the insertion stamp, kept together so that
-/// the cavity search touches one cache line per tet.
-#[derive(Clone, Copy)]
+/// A tet of the builder: vertices, neighbours, the insertion stamp and a lock, kept together
+/// so that the cavity search touches one cache line per tet.
+///
+/// Worker threads share the tets; a thread reads or writes a tet only while it holds the
+/// tet's `lock` (no waiting: a busy lock makes the insertion back off). The fields are atomics
+/// so that this needs no `unsafe`; relaxed accesses are plain loads and stores.
 struct Tet {
-    v: [u32; 4],
-    n: [u32; 4],
-    /// Insertion stamp; [`DEAD`] for a free slot.
-    mark: u32,
+    v: [AtomicU32; 4],
+    n: [AtomicU32; 4],
+    /// Insertion stamp (`2v + 1` in the cavity of vertex `v`, `2v + 2` next to it);
+    /// [`DEAD`] for a free slot.
+    mark: AtomicU32,
+    /// 0 when free, else the id of the worker holding the tet.
+    lock: AtomicU32,
+}
+
+impl Tet {
+    fn dead() -> Self {
+        Self {
+            v: [0; 4].map(AtomicU32::new),
+            n: [NONE; 4].map(AtomicU32::new),
+            mark: AtomicU32::new(DEAD),
+            lock: AtomicU32::new(0),
+        }
+    }
+    #[inline]
+    fn verts(&self) -> [u32; 4] {
+        [0, 1, 2, 3].map(|k| self.v[k].load(Relaxed))
+    }
+    #[inline]
+    fn nbrs(&self) -> [u32; 4] {
+        [0, 1, 2, 3].map(|k| self.n[k].load(Relaxed))
+    }
+    #[inline]
+    fn mark(&self) -> u32 {
+        self.mark.load(Relaxed)
+    }
+    #[inline]
+    fn set_mark(&self, m: u32) {
+        self.mark.store(m, Relaxed);
+    }
+    #[inline]
+    fn set_nbr(&self, k: usize, t: u32) {
+        self.n[k].store(t, Relaxed);
+    }
 }
 
 const DEAD: u32 = u32::MAX;
@@ -227,30 +308,398 @@ const OTHER_TWO: [[[usize; 2]; 4]; 4] = {
     t
 };
 
-struct Builder {
-    /// Real vertices followed by the 4 super-tetrahedron vertices.
-    pos: Vec<[f64; 3]>,
+const EMPTY_KEY: u64 = u64::MAX;
+
+/// Inputs smaller than this are triangulated by one thread.
+const PARALLEL_MIN_POINTS: usize = 8192;
+
+/// Why an insertion backed off (nothing was changed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fail {
+    /// A tet it needed is held by another worker.
+    Busy,
+    /// The worker ran out of free tet slots.
+    NoSpace,
+}
+
+/// What the workers share: the points (numbered in insertion order) and the tet arena.
+struct Shared<'a> {
+    pos: &'a [[f64; 3]],
+    /// Input number of each real vertex (the super-tetrahedron's keep their own, larger ones).
+    rank: &'a [u32],
+    tets: &'a [Tet],
     n_real: u32,
     /// Static insphere bound for tets of real vertices only (their differences are bounded by
     /// the extent of the input).
     static_eps: f64,
-    tets: Vec<Tet>,
+}
+
+impl Shared<'_> {
+    #[inline]
+    fn p(&self, v: u32) -> &[f64; 3] {
+        &self.pos[v as usize]
+    }
+
+    #[inline]
+    fn face_sees(&self, tv: [u32; 4], k: usize, p: &[f64; 3]) -> i32 {
+        let mut q = [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])];
+        q[k] = p;
+        orient3d(q[0], q[1], q[2], q[3])
+    }
+
+    #[inline]
+    fn conflicts(&self, tv: [u32; 4], v: u32) -> bool {
+        let n = self.n_real;
+        let eps = if tv[0] < n && tv[1] < n && tv[2] < n && tv[3] < n {
+            self.static_eps
+        } else {
+            f64::INFINITY
+        };
+        // Ties are broken by the input numbering, not the insertion order, so that the
+        // result does not depend on how the points are scheduled.
+        let rank = |x: u32| self.rank.get(x as usize).copied().unwrap_or(x);
+        in_conflict_bounded(
+            [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])],
+            || (tv.map(rank), rank(v)),
+            self.p(v),
+            eps,
+        )
+    }
+}
+
+/// One inserting thread: its free slots and scratch space. With `PAR = false` it is the only
+/// thread and takes no locks.
+struct Worker {
+    /// Lock id (>= 1).
+    id: u32,
+    /// Free tet slots owned by this worker.
     free: Vec<u32>,
+    /// Never-used slots reserved for this worker (`fresh.0..fresh.1`).
+    fresh: (u32, u32),
+    /// A tet made by the last insertion (the start of the next walk).
+    last: u32,
+    /// Vertices this worker backed off from.
+    deferred: Vec<u32>,
     rng: SplitMix,
-    // Per-insertion scratch.
     stack: Vec<u32>,
     cavity: Vec<u32>,
+    /// Tets locked (and stamped) by the current insertion: the cavity and its neighbours.
+    locked: Vec<u32>,
     boundary: Vec<(u32, u8, u32, u8)>,
     new_tets: Vec<([u32; 4], u32, u8)>,
+    /// Slots taken from `free` / `fresh` for the current insertion.
+    taken: Vec<u32>,
     /// Open-addressing table edge key -> (tet, face) for linking the new tets.
     table: Vec<(u64, u32, u8)>,
     used: Vec<usize>,
 }
 
-const EMPTY_KEY: u64 = u64::MAX;
+impl Worker {
+    fn new(id: u32, seed: u64) -> Self {
+        Self {
+            id,
+            free: Vec::new(),
+            fresh: (0, 0),
+            last: 0,
+            deferred: Vec::new(),
+            rng: SplitMix(seed),
+            stack: Vec::new(),
+            cavity: Vec::new(),
+            locked: Vec::new(),
+            boundary: Vec::new(),
+            new_tets: Vec::new(),
+            taken: Vec::new(),
+            table: vec![(EMPTY_KEY, 0, 0); 256],
+            used: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn try_lock<const PAR: bool>(&self, sh: &Shared, t: u32) -> bool {
+        !PAR || sh.tets[t as usize]
+            .lock
+            .compare_exchange(0, self.id, Acquire, Relaxed)
+            .is_ok()
+    }
+
+    #[inline]
+    fn unlock<const PAR: bool>(&self, sh: &Shared, t: u32) {
+        if PAR {
+            sh.tets[t as usize].lock.store(0, Release);
+        }
+    }
+
+    /// Locks a live tet to start a walk from: the last one made, or (in parallel, when
+    /// another worker has removed it) one of the slots before it, which this worker filled
+    /// recently.
+    fn start<const PAR: bool>(&self, sh: &Shared) -> Option<u32> {
+        let len = sh.tets.len() as u32;
+        for i in 0..256 {
+            let t = (self.last + len - i % len) % len;
+            if self.try_lock::<PAR>(sh, t) {
+                if sh.tets[t as usize].mark() != DEAD {
+                    return Some(t);
+                }
+                self.unlock::<PAR>(sh, t);
+            }
+            if !PAR {
+                break;
+            }
+        }
+        None
+    }
+
+    /// Stochastic visibility walk from `self.last` to a tet containing vertex `v`; the tet is
+    /// returned locked.
+    fn locate<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<u32, Fail> {
+        let p = sh.pos[v as usize];
+        let mut t = self.start::<PAR>(sh).ok_or(Fail::Busy)?;
+        let mut prev = NONE;
+        let max_steps = 64 + 4 * sh.tets.len();
+        for _ in 0..max_steps {
+            let tet = &sh.tets[t as usize];
+            let (tv, tn) = (tet.verts(), tet.nbrs());
+            let r = (self.rng.next() & 3) as usize;
+            let mut next = NONE;
+            for j in 0..4 {
+                let k = (r + j) & 3;
+                let nb = tn[k];
+                if nb == NONE || nb == prev {
+                    continue;
+                }
+                if sh.face_sees(tv, k, &p) < 0 {
+                    next = nb;
+                    break;
+                }
+            }
+            if next == NONE {
+                // `prev` was skipped: p is strictly in front of the face we came through.
+                debug_assert!(
+                    (0..4).all(|k| sh.face_sees(tv, k, &p) >= 0),
+                    "the walk to {v} ended outside tet {t}"
+                );
+                return Ok(t);
+            }
+            // Lock the next tet before letting go of this one, so that it is still our
+            // neighbour when we get it.
+            if !self.try_lock::<PAR>(sh, next) {
+                self.unlock::<PAR>(sh, t);
+                return Err(Fail::Busy);
+            }
+            self.unlock::<PAR>(sh, t);
+            prev = t;
+            t = next;
+        }
+        self.unlock::<PAR>(sh, t);
+        if PAR {
+            return Err(Fail::Busy);
+        }
+        // Safety net (never expected): scan for a containing tet.
+        Ok((0..sh.tets.len() as u32)
+            .find(|&t| {
+                let tet = &sh.tets[t as usize];
+                tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0)
+            })
+            .unwrap_or(t))
+    }
+
+    /// Undoes the stamps and locks of a failed insertion.
+    fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
+        for &t in &self.locked {
+            sh.tets[t as usize].set_mark(0);
+            self.unlock::<PAR>(sh, t);
+        }
+        self.locked.clear();
+        fail
+    }
+
+    /// Inserts vertex `v`, or backs off leaving the triangulation unchanged.
+    fn insert<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<(), Fail> {
+        let t = self.locate::<PAR>(sh, v)?;
+        let in_cav = 2 * v + 1;
+        let not_cav = 2 * v + 2;
+        self.cavity.clear();
+        self.boundary.clear();
+        self.stack.clear();
+        self.locked.clear();
+        self.locked.push(t);
+        self.stack.push(t);
+        sh.tets[t as usize].set_mark(in_cav);
+        while let Some(c) = self.stack.pop() {
+            self.cavity.push(c);
+            let cn = sh.tets[c as usize].nbrs();
+            for k in 0..4u8 {
+                let nb = cn[k as usize];
+                if nb == NONE {
+                    self.boundary.push((c, k, NONE, 0));
+                    continue;
+                }
+                let nt = &sh.tets[nb as usize];
+                if PAR && nt.lock.load(Relaxed) != self.id {
+                    if !self.try_lock::<PAR>(sh, nb) {
+                        return Err(self.back_off::<PAR>(sh, Fail::Busy));
+                    }
+                    self.locked.push(nb);
+                    // A fresh lock: whatever stamp the tet has is not ours.
+                    nt.set_mark(0);
+                }
+                let mark = nt.mark();
+                if mark == in_cav {
+                    continue;
+                }
+                if !PAR && mark != not_cav {
+                    self.locked.push(nb);
+                }
+                if mark != not_cav && sh.conflicts(nt.verts(), v) {
+                    nt.set_mark(in_cav);
+                    self.stack.push(nb);
+                } else {
+                    nt.set_mark(not_cav);
+                    let j = nt
+                        .nbrs()
+                        .iter()
+                        .position(|&x| x == c)
+                        .expect("adjacency is symmetric") as u8;
+                    self.boundary.push((c, k, nb, j));
+                }
+            }
+        }
+        // Slots: the cavity's, then free ones, then fresh ones; all taken before any change.
+        let extra = self.boundary.len().saturating_sub(self.cavity.len());
+        self.taken.clear();
+        let mut skipped = 0usize;
+        while self.taken.len() < extra {
+            if self.free.len() > skipped {
+                let i = self.free.len() - 1 - skipped;
+                let f = self.free[i];
+                // A walker of another worker may hold a free slot for a moment.
+                if self.try_lock::<PAR>(sh, f) {
+                    self.free.swap_remove(i);
+                    self.taken.push(f);
+                } else {
+                    skipped += 1;
+                }
+            } else if self.fresh.0 < self.fresh.1 {
+                let f = self.fresh.0;
+                self.fresh.0 += 1;
+                if PAR {
+                    sh.tets[f as usize].lock.store(self.id, Relaxed);
+                }
+                self.taken.push(f);
+            } else {
+                for &f in &self.taken {
+                    self.unlock::<PAR>(sh, f);
+                }
+                self.free.extend_from_slice(&self.taken);
+                self.taken.clear();
+                return Err(self.back_off::<PAR>(sh, Fail::NoSpace));
+            }
+        }
+        // New tets: one per boundary face, the cavity tet's vertex k replaced by v. Read the
+        // cavity tets' vertices before their slots are reused.
+        self.new_tets.clear();
+        for &(c, k, _, _) in &self.boundary {
+            let mut tv = sh.tets[c as usize].verts();
+            tv[k as usize] = v;
+            self.new_tets.push((tv, 0, k));
+        }
+        let ncav = self.cavity.len();
+        for i in 0..self.new_tets.len() {
+            self.new_tets[i].1 = if i < ncav {
+                self.cavity[i]
+            } else {
+                self.taken[i - ncav]
+            };
+        }
+        for i in self.new_tets.len()..ncav {
+            let c = self.cavity[i];
+            sh.tets[c as usize].set_mark(DEAD);
+            self.free.push(c);
+        }
+        // Size the edge table (3 entries per new tet, load <= 1/2).
+        let need = (6 * self.new_tets.len()).next_power_of_two().max(256);
+        if self.table.len() < need {
+            self.table = vec![(EMPTY_KEY, 0, 0); need];
+        }
+        let mask = self.table.len() - 1;
+        let mut used_slots = std::mem::take(&mut self.used);
+        used_slots.clear();
+        for i in 0..self.new_tets.len() {
+            let (tv, id, k) = self.new_tets[i];
+            let (_, _, nb, j) = self.boundary[i];
+            let tet = &sh.tets[id as usize];
+            for q in 0..4 {
+                tet.v[q].store(tv[q], Relaxed);
+                tet.n[q].store(NONE, Relaxed);
+            }
+            tet.set_mark(0);
+            tet.set_nbr(k as usize, nb);
+            if nb != NONE {
+                sh.tets[nb as usize].set_nbr(j as usize, id);
+            }
+            debug_assert!(
+                orient3d(sh.p(tv[0]), sh.p(tv[1]), sh.p(tv[2]), sh.p(tv[3])) > 0,
+                "flat or inverted tet created inserting {v}: {tv:?} cavity {} boundary {}",
+                self.cavity.len(),
+                self.boundary.len()
+            );
+            for f in 0..4u8 {
+                if f == k {
+                    continue;
+                }
+                // The face opposite f contains v and the two vertices other than f and k.
+                let [i0, i1] = OTHER_TWO[f as usize][k as usize];
+                let e = [tv[i0], tv[i1]];
+                let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
+                let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
+                loop {
+                    let slot = self.table[h];
+                    if slot.0 == EMPTY_KEY {
+                        self.table[h] = (key, id, f);
+                        used_slots.push(h);
+                        break;
+                    }
+                    if slot.0 == key {
+                        let (_, a, fa) = slot;
+                        sh.tets[a as usize].set_nbr(fa as usize, id);
+                        tet.set_nbr(f as usize, a);
+                        break;
+                    }
+                    h = (h + 1) & mask;
+                }
+            }
+        }
+        for &h in &used_slots {
+            self.table[h].0 = EMPTY_KEY;
+        }
+        self.used = used_slots;
+        self.last = self.new_tets[0].1;
+        // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
+        if PAR {
+            for &t in &self.locked {
+                self.unlock::<PAR>(sh, t);
+            }
+            for &t in &self.taken {
+                self.unlock::<PAR>(sh, t);
+            }
+        }
+        self.locked.clear();
+        Ok(())
+    }
+}
+
+struct Builder {
+    /// Real vertices (in insertion order) followed by the 4 super-tetrahedron vertices.
+    pos: Vec<[f64; 3]>,
+    /// Input number of each real vertex.
+    rank: Vec<u32>,
+    n_real: u32,
+    static_eps: f64,
+    tets: Vec<Tet>,
+}
 
 impl Builder {
-    fn new(mut pos: Vec<[f64; 3]>) -> Self {
+    fn new(mut pos: Vec<[f64; 3]>, rank: Vec<u32>) -> Self {
         let n_real = pos.len() as u32;
         let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
         if let Some(first) = pos.first() {
@@ -291,235 +740,147 @@ impl Builder {
             tet.swap(0, 1);
         }
         let mut tets = Vec::with_capacity(7 * pos.len() + 16);
-        tets.push(Tet {
-            v: tet,
-            n: [NONE; 4],
-            mark: 0,
-        });
+        let first = Tet::dead();
+        for k in 0..4 {
+            first.v[k].store(tet[k], Relaxed);
+        }
+        first.set_mark(0);
+        tets.push(first);
         Self {
             pos,
+            rank,
             n_real,
             static_eps,
             tets,
-            free: Vec::new(),
-            rng: SplitMix(12345),
-            stack: Vec::new(),
-            cavity: Vec::new(),
-            boundary: Vec::new(),
-            new_tets: Vec::new(),
-            table: vec![(EMPTY_KEY, 0, 0); 256],
-            used: Vec::new(),
         }
     }
 
-    #[inline]
-    fn p(&self, v: u32) -> &[f64; 3] {
-        &self.pos[v as usize]
+    fn shared(&self) -> Shared<'_> {
+        Shared {
+            pos: &self.pos,
+            rank: &self.rank,
+            tets: &self.tets,
+            n_real: self.n_real,
+            static_eps: self.static_eps,
+        }
     }
 
-    fn run(mut self) -> Delaunay {
+    /// Adds `count` free slots for `w`.
+    fn grow(&mut self, w: &mut Worker, count: usize) {
+        let start = self.tets.len() as u32;
+        self.tets.resize_with(self.tets.len() + count, Tet::dead);
+        if w.fresh.0 < w.fresh.1 {
+            w.free.extend(w.fresh.0..w.fresh.1);
+        }
+        w.fresh = (start, self.tets.len() as u32);
+    }
+
+    /// Inserts `verts` one after the other with a single worker.
+    fn insert_sequential(&mut self, w: &mut Worker, verts: impl IntoIterator<Item = u32>) {
+        for v in verts {
+            loop {
+                let result = {
+                    let sh = self.shared();
+                    w.insert::<false>(&sh, v)
+                };
+                match result {
+                    Ok(()) => break,
+                    Err(_) => {
+                        let count = (self.tets.len() / 2).max(1024);
+                        self.grow(w, count);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Inserts every vertex: the first BRIO rounds by one thread, the later (large) rounds by
+    /// `threads` workers, each taking one stretch of every round's Hilbert order, then the
+    /// vertices the workers backed off from by one thread.
+    fn run(mut self, rounds: &[usize], threads: usize) -> Delaunay {
         let n = self.n_real as usize;
-        let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
-        if n > 0 {
-            lo = self.pos[0];
-            hi = self.pos[0];
+        let mut main = Worker::new(1, 12345);
+        let threads = threads.clamp(1, 64);
+        if threads == 1 || n < PARALLEL_MIN_POINTS {
+            self.insert_sequential(&mut main, 0..self.n_real);
+            return self.finish();
         }
-        for p in &self.pos[..n] {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
+        // Sequential prefix: enough points that the workers' regions hardly interact.
+        let prefix_min = (n / 32).max(1024 * threads);
+        let split = rounds
+            .iter()
+            .copied()
+            .find(|&r| r >= prefix_min)
+            .unwrap_or(n);
+        self.insert_sequential(&mut main, 0..split as u32);
+        // Per-round stretches; alternate directions so that neighbouring workers never start a
+        // round where the other one ends the previous one.
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); threads];
+        for (r, w) in rounds.windows(2).enumerate() {
+            let (a, b) = (w[0].max(split), w[1]);
+            if a >= b {
+                continue;
             }
-        }
-        let order = brio_order(&self.pos[..n], lo, hi);
-        let mut last = 0u32;
-        for (it, &v) in order.iter().enumerate() {
-            let t = self.locate(last, v);
-            last = self.insert(v, t, it as u32);
-        }
-        self.finish()
-    }
-
-    #[inline]
-    fn face_sees(&self, tv: [u32; 4], k: usize, p: &[f64; 3]) -> i32 {
-        let mut q = [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])];
-        q[k] = p;
-        orient3d(q[0], q[1], q[2], q[3])
-    }
-
-    /// Stochastic visibility walk from `start` to a tet containing point `v`.
-    fn locate(&mut self, start: u32, v: u32) -> u32 {
-        let p = self.pos[v as usize];
-        let mut t = start;
-        let mut prev = NONE;
-        let max_steps = 64 + 4 * self.tets.len();
-        for _ in 0..max_steps {
-            let tet = self.tets[t as usize];
-            let r = (self.rng.next() & 3) as usize;
-            let mut moved = false;
-            for j in 0..4 {
-                let k = (r + j) & 3;
-                let nb = tet.n[k];
-                if nb == NONE || nb == prev {
-                    continue;
-                }
-                if self.face_sees(tet.v, k, &p) < 0 {
-                    prev = t;
-                    t = nb;
-                    moved = true;
-                    break;
-                }
-            }
-            if !moved {
-                // `prev` was skipped: p is strictly in front of the face we came through.
-                return t;
-            }
-        }
-        // Safety net (never expected): scan for a containing tet.
-        (0..self.tets.len() as u32)
-            .find(|&t| {
-                let tet = self.tets[t as usize];
-                tet.mark != DEAD && (0..4).all(|k| self.face_sees(tet.v, k, &p) >= 0)
-            })
-            .unwrap_or(t)
-    }
-
-    #[inline]
-    fn conflicts(&self, tv: [u32; 4], v: u32) -> bool {
-        let n = self.n_real;
-        let eps = if tv[0] < n && tv[1] < n && tv[2] < n && tv[3] < n {
-            self.static_eps
-        } else {
-            f64::INFINITY
-        };
-        in_conflict_bounded(
-            [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])],
-            tv,
-            self.p(v),
-            v,
-            eps,
-        )
-    }
-
-    /// Inserts vertex `v` located in tet `t`; returns one of the new tets.
-    fn insert(&mut self, v: u32, t: u32, it: u32) -> u32 {
-        let in_cav = 2 * it + 1;
-        let not_cav = 2 * it + 2;
-        self.cavity.clear();
-        self.boundary.clear();
-        self.stack.clear();
-        self.stack.push(t);
-        self.tets[t as usize].mark = in_cav;
-        while let Some(c) = self.stack.pop() {
-            self.cavity.push(c);
-            let cn = self.tets[c as usize].n;
-            for k in 0..4u8 {
-                let nb = cn[k as usize];
-                if nb == NONE {
-                    self.boundary.push((c, k, NONE, 0));
-                    continue;
-                }
-                let nt = self.tets[nb as usize];
-                if nt.mark == in_cav {
-                    continue;
-                }
-                if nt.mark != not_cav && self.conflicts(nt.v, v) {
-                    self.tets[nb as usize].mark = in_cav;
-                    self.stack.push(nb);
+            let len = b - a;
+            for (i, list) in lists.iter_mut().enumerate() {
+                let (s, e) = (a + len * i / threads, a + len * (i + 1) / threads);
+                if r % 2 == 0 {
+                    list.extend(s as u32..e as u32);
                 } else {
-                    self.tets[nb as usize].mark = not_cav;
-                    let j =
-                        nt.n.iter()
-                            .position(|&x| x == c)
-                            .expect("adjacency is symmetric") as u8;
-                    self.boundary.push((c, k, nb, j));
+                    list.extend((s as u32..e as u32).rev());
                 }
             }
         }
-        // New tets: one per boundary face, the cavity tet's vertex k replaced by v. Read the
-        // cavity tets' vertices before their slots are reused.
-        self.new_tets.clear();
-        for &(c, k, _, _) in &self.boundary {
-            let mut tv = self.tets[c as usize].v;
-            tv[k as usize] = v;
-            self.new_tets.push((tv, 0, k));
+        let mut workers: Vec<Worker> = (0..threads)
+            .map(|i| Worker::new(i as u32 + 2, 0x9E37 + i as u64))
+            .collect();
+        for (w, list) in workers.iter_mut().zip(&lists) {
+            // Start each worker in its own region: at the tet holding its first vertex.
+            w.last = main.last;
+            if let Some(&first) = list.first() {
+                let sh = self.shared();
+                if let Ok(t) = main.locate::<false>(&sh, first) {
+                    w.last = t;
+                }
+            }
+            let count = 15 * list.len() / 2 + 4096;
+            let start = self.tets.len() as u32;
+            self.tets.resize_with(self.tets.len() + count, Tet::dead);
+            w.fresh = (start, self.tets.len() as u32);
         }
-        let mut reuse = 0usize;
-        for i in 0..self.new_tets.len() {
-            let id = if reuse < self.cavity.len() {
-                reuse += 1;
-                self.cavity[reuse - 1]
-            } else if let Some(f) = self.free.pop() {
-                f
-            } else {
-                self.tets.push(Tet {
-                    v: [0; 4],
-                    n: [NONE; 4],
-                    mark: 0,
+        workers[0].free = std::mem::take(&mut main.free);
+        {
+            use rayon::prelude::*;
+            let sh = self.shared();
+            workers
+                .par_iter_mut()
+                .zip(lists.par_iter())
+                .for_each(|(w, list)| {
+                    for &v in list {
+                        if w.insert::<true>(&sh, v).is_err() {
+                            w.deferred.push(v);
+                        }
+                    }
                 });
-                (self.tets.len() - 1) as u32
-            };
-            self.new_tets[i].1 = id;
         }
-        for i in reuse..self.cavity.len() {
-            let c = self.cavity[i];
-            self.tets[c as usize].mark = DEAD;
-            self.free.push(c);
-        }
-        // Size the edge table (3 entries per new tet, load <= 1/2).
-        let need = (6 * self.new_tets.len()).next_power_of_two().max(256);
-        if self.table.len() < need {
-            self.table = vec![(EMPTY_KEY, 0, 0); need];
-        }
-        let mask = self.table.len() - 1;
-        let mut used_slots = std::mem::take(&mut self.used);
-        used_slots.clear();
-        for i in 0..self.new_tets.len() {
-            let (tv, id, k) = self.new_tets[i];
-            let (_, _, nb, j) = self.boundary[i];
-            self.tets[id as usize] = Tet {
-                v: tv,
-                n: [NONE; 4],
-                mark: 0,
-            };
-            self.tets[id as usize].n[k as usize] = nb;
-            if nb != NONE {
-                self.tets[nb as usize].n[j as usize] = id;
-            }
-            debug_assert!(
-                orient3d(self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])) > 0,
-                "flat or inverted tet created"
-            );
-            for f in 0..4u8 {
-                if f == k {
-                    continue;
-                }
-                // The face opposite f contains v and the two vertices other than f and k.
-                let [i0, i1] = OTHER_TWO[f as usize][k as usize];
-                let e = [tv[i0], tv[i1]];
-                let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
-                let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
-                loop {
-                    let slot = self.table[h];
-                    if slot.0 == EMPTY_KEY {
-                        self.table[h] = (key, id, f);
-                        used_slots.push(h);
-                        break;
-                    }
-                    if slot.0 == key {
-                        let (_, a, fa) = slot;
-                        self.tets[a as usize].n[fa as usize] = id;
-                        self.tets[id as usize].n[f as usize] = a;
-                        break;
-                    }
-                    h = (h + 1) & mask;
-                }
+        // Gather the slots and the deferred vertices; finish with one thread.
+        let mut deferred = Vec::new();
+        for w in &mut workers {
+            main.free.append(&mut w.free);
+            main.free.extend(w.fresh.0..w.fresh.1);
+            deferred.append(&mut w.deferred);
+            if self.tets[w.last as usize].mark() != DEAD {
+                main.last = w.last;
             }
         }
-        for &h in &used_slots {
-            self.table[h].0 = EMPTY_KEY;
+        if self.tets[main.last as usize].mark() == DEAD {
+            main.last = (0..self.tets.len() as u32)
+                .find(|&t| self.tets[t as usize].mark() != DEAD)
+                .unwrap_or(0);
         }
-        self.used = used_slots;
-        self.new_tets[0].1
+        deferred.sort_unstable();
+        self.insert_sequential(&mut main, deferred);
+        self.finish()
     }
 
     fn finish(self) -> Delaunay {
@@ -527,16 +888,17 @@ impl Builder {
         let mut remap = vec![NONE; self.tets.len()];
         let mut tets = Vec::new();
         for (t, tet) in self.tets.iter().enumerate() {
-            if tet.mark != DEAD && tet.v.iter().all(|&v| v < n) {
+            let tv = tet.verts();
+            if tet.mark() != DEAD && tv.iter().all(|&v| v < n) {
                 remap[t] = tets.len() as u32;
-                tets.push(tet.v);
+                tets.push(tv);
             }
         }
         let mut neighbors = Vec::with_capacity(tets.len());
         for (t, tet) in self.tets.iter().enumerate() {
             if remap[t] != NONE {
                 neighbors.push(
-                    tet.n
+                    tet.nbrs()
                         .map(|x| if x == NONE { NONE } else { remap[x as usize] }),
                 );
             }

@@ -184,22 +184,23 @@ pub fn static_insphere_bound(extent: f64) -> f64 {
 /// must be distinct and the points pairwise distinct (deduplicate first).
 #[inline]
 pub fn in_conflict(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32) -> bool {
-    in_conflict_bounded(t, it, e, ie, f64::INFINITY)
+    in_conflict_bounded(t, || (it, ie), e, f64::INFINITY)
 }
 
-/// [`in_conflict`] with the static filter of [`insphere_bounded`].
+/// [`in_conflict`] with the static filter of [`insphere_bounded`]; the global indices
+/// (`ids() = (it, ie)`) are only asked for when the exact test is a tie.
 #[inline]
 pub fn in_conflict_bounded(
     t: [&[f64; 3]; 4],
-    it: [u32; 4],
+    ids: impl FnOnce() -> ([u32; 4], u32),
     e: &[f64; 3],
-    ie: u32,
     static_eps: f64,
 ) -> bool {
     let s = insphere_bounded(t[0], t[1], t[2], t[3], e, static_eps);
     if s != 0 {
         return s > 0;
     }
+    let (it, ie) = ids();
     perturbed_insphere_tie(t, it, e, ie)
 }
 

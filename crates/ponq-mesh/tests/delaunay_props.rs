@@ -144,6 +144,23 @@ fn duplicates_are_merged() {
 }
 
 #[test]
+fn signed_zeros_are_one_position() {
+    // -0.0 == 0.0: these are duplicates even with other points sorting between them.
+    let mut pts = cube_corners();
+    pts.push([0.0, 0.2, -0.5]);
+    pts.push([-0.0, 0.1, 0.5]);
+    pts.push([-0.0, 0.2, -0.5]);
+    pts.push([0.0, -0.0, 0.0]);
+    pts.push([-0.0, 0.0, -0.0]);
+    let dt = Delaunay::new(&pts).unwrap();
+    assert_eq!(dt.vertices.len(), 11);
+    assert_eq!(dt.vertex_of_point[10], dt.vertex_of_point[8]);
+    assert_eq!(dt.vertex_of_point[12], dt.vertex_of_point[11]);
+    let vol = check_structure(&dt);
+    assert!((vol - 8.0).abs() < 1e-9);
+}
+
+#[test]
 fn degenerate_inputs_give_no_tets() {
     // Coplanar points, collinear points, fewer than 4 points.
     let coplanar: Vec<[f64; 3]> = (0..30)
@@ -198,4 +215,114 @@ fn larger_random_set_structure() {
     let dt = Delaunay::new(&pts).unwrap();
     let vol = check_structure(&dt);
     assert!((vol - 8.0).abs() < 1e-9, "volume {vol}");
+}
+
+/// The tets as sorted vertex quadruples, sorted: equal for equal triangulations.
+fn canonical(dt: &Delaunay) -> Vec<[u32; 4]> {
+    let mut t: Vec<[u32; 4]> = dt
+        .tets
+        .iter()
+        .map(|tv| {
+            let mut s = *tv;
+            s.sort_unstable();
+            s
+        })
+        .collect();
+    t.sort_unstable();
+    t
+}
+
+/// Every interior face is locally Delaunay: the apex across it is not strictly inside the
+/// circumsphere (locally Delaunay everywhere implies Delaunay).
+fn check_locally_delaunay(dt: &Delaunay) {
+    let p = |v: u32| &dt.vertices[v as usize];
+    for (t, tv) in dt.tets.iter().enumerate() {
+        for k in 0..4 {
+            let nb = dt.neighbors[t][k];
+            if nb == NONE {
+                continue;
+            }
+            let back = dt.neighbors[nb as usize]
+                .iter()
+                .position(|&x| x as usize == t)
+                .expect("symmetric");
+            let apex = dt.tets[nb as usize][back];
+            assert!(
+                insphere(p(tv[0]), p(tv[1]), p(tv[2]), p(tv[3]), p(apex)) <= 0,
+                "apex {apex} inside the circumsphere of tet {t}"
+            );
+        }
+    }
+}
+
+#[test]
+fn parallel_insertion_gives_the_same_triangulation() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut inputs: Vec<(&str, Vec<[f64; 3]>)> = Vec::new();
+    let random: Vec<[f64; 3]> = (0..12_000)
+        .map(|_| {
+            [
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ]
+        })
+        .collect();
+    inputs.push(("random", random));
+    // Points on the surfaces of a sphere and a box (the mesher's kind of input), with the
+    // protective corners: large empty tets inside and outside span the workers' regions.
+    let mut surface = cube_corners();
+    for i in 0..12_000 {
+        let u: [f64; 3] = [
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        ];
+        if i % 2 == 0 {
+            let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt().max(1e-9);
+            surface.push([0.3 + 0.5 * u[0] / l, 0.5 * u[1] / l, 0.5 * u[2] / l]);
+        } else {
+            // A face of the box [-0.8, 0.2]^3, snapped to a fine grid: exact coplanar ties.
+            let snap = |x: f64| (x * 64.0).round() / 64.0;
+            let mut q = [
+                snap(-0.3 + 0.5 * u[0]),
+                snap(-0.3 + 0.5 * u[1]),
+                snap(-0.3 + 0.5 * u[2]),
+            ];
+            q[i % 3] = if u[0] > 0.0 { 0.2 } else { -0.8 };
+            surface.push(q);
+        }
+    }
+    inputs.push(("surfaces", surface));
+    // An exact lattice: every cell co-spherical, every insphere decision a symbolic tie.
+    let mut lattice = Vec::new();
+    for i in 0..22 {
+        for j in 0..22 {
+            for k in 0..22 {
+                lattice.push([i as f64 * 0.25, j as f64 * 0.25, k as f64 * 0.25]);
+            }
+        }
+    }
+    inputs.push(("lattice", lattice));
+    // A coarse grid-snapped cloud: duplicates and ties everywhere.
+    let snapped: Vec<[f64; 3]> = (0..15_000)
+        .map(|_| [0, 1, 2].map(|_| rng.random_range(-10i32..=10) as f64 / 10.0))
+        .collect();
+    inputs.push(("snapped", snapped));
+    for (name, pts) in &inputs {
+        let one = Delaunay::with_threads(pts, 1).unwrap();
+        let reference = canonical(&one);
+        assert!(!reference.is_empty());
+        for threads in [2, 3, 8] {
+            let par = Delaunay::with_threads(pts, threads).unwrap();
+            check_structure(&par);
+            assert_eq!(par.vertex_of_point, one.vertex_of_point, "{name}");
+            assert_eq!(
+                canonical(&par),
+                reference,
+                "{name}: {threads} workers differ from one"
+            );
+        }
+        check_locally_delaunay(&one);
+    }
 }

@@ -97,7 +97,9 @@ fn hilbert_index(mut x: [u32; 3], bits: u32) -> u64 {
 /// Biased randomised insertion order: rounds of doubling size, each sorted along a Hilbert curve.
 /// Returns the order and the start of each round, ascending, followed by `pts.len()`.
 fn brio_order(pts: &[[f64; 3]]) -> (Vec<u32>, Vec<usize>) {
-    const BITS: u32 = 16;
+    use rayon::prelude::*;
+    // 2^10 cells per side is finer than any point spacing that matters for locality.
+    const BITS: u32 = 10;
     let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
     if let Some(first) = pts.first() {
         lo = *first;
@@ -123,6 +125,7 @@ fn brio_order(pts: &[[f64; 3]]) -> (Vec<u32>, Vec<usize>) {
         let c = |k: usize| (((p[k] - lo[k]) * scale[k]) as u32).min((1 << BITS) - 1);
         hilbert_index([c(0), c(1), c(2)], BITS)
     };
+    let keys: Vec<u64> = pts.par_iter().map(key).collect();
     let mut order: Vec<u32> = (0..pts.len() as u32).collect();
     let mut rng = SplitMix(0x005E_ED0F_D3A1);
     for i in (1..order.len()).rev() {
@@ -133,7 +136,16 @@ fn brio_order(pts: &[[f64; 3]]) -> (Vec<u32>, Vec<usize>) {
     let mut rounds = vec![end];
     while end > 0 {
         let start = if end <= 64 { 0 } else { end / 2 };
-        order[start..end].sort_by_cached_key(|&i| key(&pts[i as usize]));
+        // Ties (one Hilbert cell) keep the shuffled order: the key includes the position.
+        let mut round: Vec<(u64, u32, u32)> = order[start..end]
+            .iter()
+            .enumerate()
+            .map(|(j, &i)| (keys[i as usize], j as u32, i))
+            .collect();
+        round.par_sort_unstable();
+        for (slot, &(_, _, i)) in order[start..end].iter_mut().zip(&round) {
+            *slot = i;
+        }
         rounds.push(start);
         end = start;
     }
@@ -158,6 +170,7 @@ impl Delaunay {
     /// # Errors
     /// As [`Delaunay::new`].
     pub fn with_threads(points: &[[f64; 3]], threads: usize) -> Result<Self> {
+        use rayon::prelude::*;
         if points.len() >= (1usize << 31) - 8 {
             return Err(Error::InvalidInput(format!(
                 "{} points is more than the triangulation supports",
@@ -172,7 +185,7 @@ impl Delaunay {
         }
         // Merge exact duplicates.
         let mut idx: Vec<u32> = (0..points.len() as u32).collect();
-        idx.sort_unstable_by(|&a, &b| {
+        idx.par_sort_unstable_by(|&a, &b| {
             // `+ 0.0` turns -0.0 into 0.0: the same position must sort as one key.
             let (p, q) = (&points[a as usize], &points[b as usize]);
             (p[0] + 0.0)
@@ -806,7 +819,7 @@ impl Builder {
             return self.finish();
         }
         // Sequential prefix: enough points that the workers' regions hardly interact.
-        let prefix_min = (n / 32).max(1024 * threads);
+        let prefix_min = (n / 64).max(512 * threads);
         let split = rounds
             .iter()
             .copied()
@@ -884,25 +897,36 @@ impl Builder {
     }
 
     fn finish(self) -> Delaunay {
+        use rayon::prelude::*;
         let n = self.n_real;
+        let live: Vec<bool> = self
+            .tets
+            .par_iter()
+            .map(|tet| tet.mark() != DEAD && tet.verts().iter().all(|&v| v < n))
+            .collect();
         let mut remap = vec![NONE; self.tets.len()];
-        let mut tets = Vec::new();
-        for (t, tet) in self.tets.iter().enumerate() {
-            let tv = tet.verts();
-            if tet.mark() != DEAD && tv.iter().all(|&v| v < n) {
-                remap[t] = tets.len() as u32;
-                tets.push(tv);
+        let mut count = 0u32;
+        for (t, &l) in live.iter().enumerate() {
+            if l {
+                remap[t] = count;
+                count += 1;
             }
         }
-        let mut neighbors = Vec::with_capacity(tets.len());
-        for (t, tet) in self.tets.iter().enumerate() {
-            if remap[t] != NONE {
-                neighbors.push(
-                    tet.nbrs()
-                        .map(|x| if x == NONE { NONE } else { remap[x as usize] }),
-                );
-            }
-        }
+        let kept: Vec<u32> = (0..self.tets.len() as u32)
+            .filter(|&t| live[t as usize])
+            .collect();
+        let tets: Vec<[u32; 4]> = kept
+            .par_iter()
+            .map(|&t| self.tets[t as usize].verts())
+            .collect();
+        let neighbors: Vec<[u32; 4]> = kept
+            .par_iter()
+            .map(|&t| {
+                self.tets[t as usize]
+                    .nbrs()
+                    .map(|x| if x == NONE { NONE } else { remap[x as usize] })
+            })
+            .collect();
         let mut vertices = self.pos;
         vertices.truncate(n as usize);
         Delaunay {

@@ -136,63 +136,88 @@ fn flip_cost(cx: &TetComplex, labels: &[Label], set: &[u32], from: Label) -> f64
     delta
 }
 
+/// True when the directed edges `(start, end)` form one simple cycle: every link vertex
+/// starts exactly one edge and ends exactly one, and following the edges from the first one
+/// visits all of them.
+fn is_one_cycle(edges: &[(u32, u32)]) -> bool {
+    let n = edges.len();
+    let mut buf = [(0u32, 0u32); 32];
+    let mut heap = Vec::new();
+    let e: &mut [(u32, u32)] = if n <= buf.len() {
+        buf[..n].copy_from_slice(edges);
+        &mut buf[..n]
+    } else {
+        heap.extend_from_slice(edges);
+        &mut heap
+    };
+    e.sort_unstable();
+    if e.windows(2).any(|w| w[0].0 == w[1].0) {
+        return false;
+    }
+    // Starts are distinct; follow the successor map (n steps at most).
+    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i].1);
+    let first = e[0].0;
+    let mut x = e[0].1;
+    let mut steps = 1;
+    while x != first {
+        match next(x) {
+            Some(y) if steps < n => {
+                x = y;
+                steps += 1;
+            }
+            _ => return false,
+        }
+    }
+    // Back at the start after visiting every edge once: with distinct starts the ends are
+    // then distinct too, and the cycle is the whole link.
+    steps == n
+}
+
 /// Vertices where the current inside/outside boundary is not a single disc: their boundary
 /// triangles' opposite edges (the vertex's link in the surface) do not form one simple cycle.
 /// A cheap O(#faces) scan that seeds the repair.
 pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
-    // Link edges per vertex, as (vertex, a, b) with a -> b the directed edge opposite it.
-    let mut link: Vec<(u32, u32, u32)> = Vec::new();
-    for (t, tv) in cx.dt.tets.iter().enumerate() {
-        if labels[t] != Label::Inside {
-            continue;
-        }
-        for (k, f) in FACES.iter().enumerate() {
-            if is_outside(labels, cx.neighbor(t as u32, k)) {
-                let [a, b, c] = f.map(|i| tv[i]);
-                link.push((a, b, c));
-                link.push((b, c, a));
-                link.push((c, a, b));
-            }
+    use rayon::prelude::*;
+    let faces: Vec<[u32; 3]> = cx
+        .dt
+        .tets
+        .par_iter()
+        .enumerate()
+        .filter(|(t, _)| labels[*t] == Label::Inside)
+        .flat_map_iter(|(t, tv)| {
+            FACES
+                .iter()
+                .enumerate()
+                .filter(move |(k, _)| is_outside(labels, cx.neighbor(t as u32, *k)))
+                .map(move |(_, f)| f.map(|i| tv[i]))
+        })
+        .collect();
+    // Link edges per vertex (CSR): the edge b -> c opposite a in each face (a, b, c).
+    let nv = cx.dt.vertices.len();
+    let mut offsets = vec![0u32; nv + 1];
+    for f in &faces {
+        for &v in f {
+            offsets[v as usize + 1] += 1;
         }
     }
-    link.sort_unstable();
-    let mut bad = Vec::new();
-    let mut i = 0;
-    while i < link.len() {
-        let v = link[i].0;
-        let mut j = i;
-        while j < link.len() && link[j].0 == v {
-            j += 1;
-        }
-        // One simple cycle: every link vertex starts exactly one edge and ends exactly one,
-        // and following the edges from the first one visits all of them.
-        let edges = &link[i..j];
-        let n = edges.len();
-        let mut starts: Vec<u32> = edges.iter().map(|e| e.1).collect();
-        let mut ends: Vec<u32> = edges.iter().map(|e| e.2).collect();
-        starts.sort_unstable();
-        ends.sort_unstable();
-        let simple = starts.windows(2).all(|w| w[0] != w[1])
-            && ends.windows(2).all(|w| w[0] != w[1])
-            && starts == ends;
-        let ok = simple && {
-            // edges are sorted by start: walk the successor map.
-            let next = |x: u32| edges[edges.binary_search_by_key(&x, |e| e.1).unwrap_or(0)].2;
-            let first = edges[0].1;
-            let mut x = next(first);
-            let mut steps = 1;
-            while x != first && steps <= n {
-                x = next(x);
-                steps += 1;
-            }
-            steps == n
-        };
-        if !ok {
-            bad.push(v);
-        }
-        i = j;
+    for i in 0..nv {
+        offsets[i + 1] += offsets[i];
     }
-    bad
+    let mut fill = offsets.clone();
+    let mut link = vec![(0u32, 0u32); offsets[nv] as usize];
+    for &[a, b, c] in &faces {
+        for (v, e) in [(a, (b, c)), (b, (c, a)), (c, (a, b))] {
+            link[fill[v as usize] as usize] = e;
+            fill[v as usize] += 1;
+        }
+    }
+    (0..nv as u32)
+        .into_par_iter()
+        .filter(|&v| {
+            let edges = &link[offsets[v as usize] as usize..offsets[v as usize + 1] as usize];
+            !edges.is_empty() && !is_one_cycle(edges)
+        })
+        .collect()
 }
 
 /// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.

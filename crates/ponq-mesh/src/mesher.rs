@@ -178,6 +178,11 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     let mut quadrics = vec![Quadric::zero(); nv];
     let mut protective = vec![false; nv];
     let mut source = vec![u32::MAX; nv];
+    let mut sources = vec![0u32; nv];
+    let normalized: Vec<Quadric> = {
+        use rayon::prelude::*;
+        ponq.quadrics.par_iter().map(Quadric::normalized).collect()
+    };
     for (i, &v) in dt.vertex_of_point.iter().enumerate() {
         let v = v as usize;
         if i >= m {
@@ -191,15 +196,19 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         if source[v] == u32::MAX {
             source[v] = i as u32;
         }
+        sources[v] += 1;
         let n = unit(ponq.normals[i]);
         for k in 0..3 {
             normals[v][k] += n[k];
         }
-        quadrics[v] += ponq.quadrics[i].normalized();
+        quadrics[v] += normalized[i];
     }
     for v in 0..nv {
         normals[v] = unit(normals[v]);
-        quadrics[v] = quadrics[v].normalized();
+        // A single normalised quadric is already normalised; a sum of several is not.
+        if sources[v] > 1 {
+            quadrics[v] = quadrics[v].normalized();
+        }
     }
     stats.vertices = nv;
     stats.tets = dt.tets.len();

@@ -87,12 +87,14 @@ impl Ponq {
     pub fn vstars(&self) -> Vec<[f64; 3]> {
         match &self.vstars {
             Some(v) => v.clone(),
-            None => self
-                .quadrics
-                .iter()
-                .zip(&self.points)
-                .map(|(q, p)| q.optimal_point(*p, SVD_CUTOFF))
-                .collect(),
+            None => {
+                use rayon::prelude::*;
+                self.quadrics
+                    .par_iter()
+                    .zip(&self.points)
+                    .map(|(q, p)| q.optimal_point(*p, SVD_CUTOFF))
+                    .collect()
+            }
         }
     }
 }

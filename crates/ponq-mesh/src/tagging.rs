@@ -55,10 +55,18 @@ pub fn tag_all(cx: &TetComplex, small_factor: f64) -> Vec<Label> {
         .map(|t| tag_tet(cx, t))
         .collect();
     let threshold = small_factor * cx.cell_size * cx.cell_size;
-    for v in 0..cx.dt.vertices.len() as u32 {
-        if cx.protective[v as usize] {
-            continue;
-        }
+    // The rule only ever turns unknown tets into inside / outside ones, so a vertex that has
+    // both already keeps both: only the others need the (ordered, sequential) pass below.
+    let candidates: Vec<u32> = (0..cx.dt.vertices.len() as u32)
+        .into_par_iter()
+        .filter(|&v| {
+            let inc = cx.incident(v);
+            let has = |l: Label| inc.iter().any(|&t| labels[t as usize] == l);
+            let settled = has(Label::Inside) && has(Label::Outside);
+            !cx.protective[v as usize] && !settled
+        })
+        .collect();
+    for v in candidates {
         let inc = cx.incident(v);
         let has = |l: Label, labels: &[Label]| inc.iter().any(|&t| labels[t as usize] == l);
         if !has(Label::Inside, &labels) && !has(Label::Outside, &labels) {

@@ -56,24 +56,58 @@ impl TetComplex {
         cell_size: f64,
         h: f64,
     ) -> Self {
+        use rayon::prelude::*;
+        // Counting sort of (vertex, tet) by vertex, one vertex range per thread: each thread
+        // reads all tets but writes only its own part, so lists stay sorted by tet.
         let nv = dt.vertices.len();
-        let mut counts = vec![0u32; nv + 1];
-        for t in &dt.tets {
-            for &v in t {
-                counts[v as usize + 1] += 1;
+        let parts = rayon::current_num_threads().clamp(1, 16);
+        let bounds: Vec<usize> = (0..=parts).map(|i| nv * i / parts).collect();
+        let tets = &dt.tets;
+        let counts: Vec<Vec<u32>> = (0..parts)
+            .into_par_iter()
+            .map(|c| {
+                let (lo, hi) = (bounds[c], bounds[c + 1]);
+                let mut cnt = vec![0u32; hi - lo];
+                for t in tets {
+                    for &v in t {
+                        let v = v as usize;
+                        if v >= lo && v < hi {
+                            cnt[v - lo] += 1;
+                        }
+                    }
+                }
+                cnt
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(nv + 1);
+        offsets.push(0u32);
+        for &c in counts.iter().flatten() {
+            offsets.push(offsets[offsets.len() - 1] + c);
+        }
+        let mut incident = vec![0u32; offsets[nv] as usize];
+        let mut slices = Vec::with_capacity(parts);
+        let mut rest = &mut incident[..];
+        for c in 0..parts {
+            let len = (offsets[bounds[c + 1]] - offsets[bounds[c]]) as usize;
+            let (a, b) = rest.split_at_mut(len);
+            slices.push(a);
+            rest = b;
+        }
+        slices.into_par_iter().enumerate().for_each(|(c, slice)| {
+            let (lo, hi) = (bounds[c], bounds[c + 1]);
+            let base = offsets[lo];
+            let mut fill: Vec<u32> = offsets[lo..hi].iter().map(|o| o - base).collect();
+            for (ti, t) in tets.iter().enumerate() {
+                for &v in t {
+                    let v = v as usize;
+                    if v >= lo && v < hi {
+                        slice[fill[v - lo] as usize] = ti as u32;
+                        fill[v - lo] += 1;
+                    }
+                }
             }
-        }
-        for i in 0..nv {
-            counts[i + 1] += counts[i];
-        }
-        let mut fill = counts.clone();
-        let mut incident = vec![0u32; counts[nv] as usize];
-        for (ti, t) in dt.tets.iter().enumerate() {
-            for &v in t {
-                incident[fill[v as usize] as usize] = ti as u32;
-                fill[v as usize] += 1;
-            }
-        }
+        });
+        let counts = offsets;
         Self {
             dt,
             normals,

@@ -541,6 +541,9 @@ impl Worker {
         while let Some(c) = self.stack.pop() {
             self.cavity.push(c);
             let cn = sh.tets[c as usize].nbrs();
+            // Touch the four neighbours together so that their cache misses overlap.
+            let first_touch =
+                cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.lock.load(Relaxed)));
             for k in 0..4u8 {
                 let nb = cn[k as usize];
                 if nb == NONE {
@@ -548,7 +551,7 @@ impl Worker {
                     continue;
                 }
                 let nt = &sh.tets[nb as usize];
-                if PAR && nt.lock.load(Relaxed) != self.id {
+                if PAR && first_touch[k as usize] != self.id {
                     if !self.try_lock::<PAR>(sh, nb) {
                         return Err(self.back_off::<PAR>(sh, Fail::Busy));
                     }
@@ -634,7 +637,9 @@ impl Worker {
         if self.table.len() < need {
             self.table = vec![(EMPTY_KEY, 0, 0); need];
         }
-        let mask = self.table.len() - 1;
+        // Hash into the first `need` slots only: the table may have grown for one big cavity,
+        // and spreading small cavities over all of it would miss the cache.
+        let mask = need - 1;
         let mut used_slots = std::mem::take(&mut self.used);
         used_slots.clear();
         for i in 0..self.new_tets.len() {

@@ -6,17 +6,21 @@ use crate::trimesh::TriMesh;
 /// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the
 /// used ones. Also returns, for each output vertex, its Delaunay vertex index.
 pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>) {
-    let mut faces = Vec::new();
-    for (t, tv) in cx.dt.tets.iter().enumerate() {
-        if labels[t] != Label::Inside {
-            continue;
-        }
-        for (k, f) in FACES.iter().enumerate() {
-            if is_outside(labels, cx.neighbor(t as u32, k)) {
-                faces.push(f.map(|i| tv[i]));
-            }
-        }
-    }
+    use rayon::prelude::*;
+    let faces: Vec<[u32; 3]> = cx
+        .dt
+        .tets
+        .par_iter()
+        .enumerate()
+        .filter(|(t, _)| labels[*t] == Label::Inside)
+        .flat_map_iter(|(t, tv)| {
+            FACES
+                .iter()
+                .enumerate()
+                .filter(move |(k, _)| is_outside(labels, cx.neighbor(t as u32, *k)))
+                .map(move |(_, f)| f.map(|i| tv[i]))
+        })
+        .collect();
     let mut mesh = TriMesh {
         vertices: cx.dt.vertices.clone(),
         faces,

@@ -10,7 +10,7 @@ use crate::extract::extract_boundary;
 use crate::manifold::{ManifoldStats, make_manifold};
 use crate::open_surface::cull_open;
 use crate::ponq::Ponq;
-use crate::quadric::Quadric;
+use crate::quadric::{Quadric, SVD_CUTOFF};
 use crate::tagging::tag_all;
 use crate::trimesh::TriMesh;
 
@@ -133,7 +133,25 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         ..Default::default()
     };
     let t0 = Instant::now();
-    let vstars = ponq.vstars();
+    // v* (unless stored) and the normalised quadrics, from one eigen-decomposition each.
+    let (vstars, normalized): (Vec<[f64; 3]>, Vec<Quadric>) = {
+        use rayon::prelude::*;
+        match &ponq.vstars {
+            Some(v) => (
+                v.clone(),
+                ponq.quadrics.par_iter().map(Quadric::normalized).collect(),
+            ),
+            None => ponq
+                .quadrics
+                .par_iter()
+                .zip(&ponq.points)
+                .map(|(q, p)| {
+                    let (v, largest) = q.optimal_point_and_scale(*p, SVD_CUTOFF);
+                    (v, q.scaled_by_largest(largest))
+                })
+                .unzip(),
+        }
+    };
     if let Some(i) = vstars.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         return Err(Error::InvalidInput(format!("v*[{i}] is not finite")));
     }
@@ -179,10 +197,6 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     let mut protective = vec![false; nv];
     let mut source = vec![u32::MAX; nv];
     let mut sources = vec![0u32; nv];
-    let normalized: Vec<Quadric> = {
-        use rayon::prelude::*;
-        ponq.quadrics.par_iter().map(Quadric::normalized).collect()
-    };
     for (i, &v) in dt.vertex_of_point.iter().enumerate() {
         let v = v as usize;
         if i >= m {

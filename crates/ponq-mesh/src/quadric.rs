@@ -136,7 +136,7 @@ impl Quadric {
 
     /// Eigenvalues of `A` in decreasing order.
     pub fn eigenvalues(&self) -> [f64; 3] {
-        let e = SymmetricEigen::new(self.a).eigenvalues;
+        let e = self.a.symmetric_eigenvalues();
         let mut v = [e[0], e[1], e[2]];
         v.sort_by(|x, y| y.total_cmp(x));
         v
@@ -150,12 +150,7 @@ impl Quadric {
     /// The quadric divided by the largest eigenvalue of `A` (SPEC section 6, step 0).
     /// A quadric whose `A` has no positive eigenvalue is returned unchanged.
     pub fn normalized(&self) -> Self {
-        let l = self.largest_eigenvalue();
-        if l > 0.0 && l.is_finite() {
-            *self * (1.0 / l)
-        } else {
-            *self
-        }
+        self.scaled_by_largest(self.largest_eigenvalue())
     }
 
     /// Anisotropy `lambda_2 / lambda_1` of `A` (two largest eigenvalues): near 0 on flat
@@ -174,13 +169,20 @@ impl Quadric {
     /// SVD pseudo-inverse of `A` keeping singular values with `sigma_i / sigma_1 > cutoff`,
     /// relative to `reference`: `v* = r + A^+ (b - A r)`. With `A = 0` this is `reference`.
     pub fn optimal_point(&self, reference: [f64; 3], cutoff: f64) -> [f64; 3] {
+        self.optimal_point_and_scale(reference, cutoff).0
+    }
+
+    /// [`Quadric::optimal_point`] and [`Quadric::largest_eigenvalue`] from one
+    /// eigen-decomposition of `A`.
+    pub fn optimal_point_and_scale(&self, reference: [f64; 3], cutoff: f64) -> ([f64; 3], f64) {
         let r = Vector3::from(reference);
         let rhs = self.b - self.a * r;
         let eig = SymmetricEigen::new(self.a);
+        let largest = eig.eigenvalues.max();
         // A is symmetric PSD: its SVD is its eigen-decomposition (with |lambda| as sigma).
         let smax = eig.eigenvalues.iter().fold(0.0f64, |m, &l| m.max(l.abs()));
         if !(smax > 0.0) || !smax.is_finite() {
-            return reference;
+            return (reference, largest);
         }
         let mut x = Vector3::zeros();
         for k in 0..3 {
@@ -192,9 +194,19 @@ impl Quadric {
         }
         let v = r + x;
         if v.iter().all(|c| c.is_finite()) {
-            [v[0], v[1], v[2]]
+            ([v[0], v[1], v[2]], largest)
         } else {
-            reference
+            (reference, largest)
+        }
+    }
+
+    /// The quadric divided by `largest` (its largest eigenvalue, as from
+    /// [`Quadric::optimal_point_and_scale`]); unchanged when `largest` is not positive.
+    pub fn scaled_by_largest(&self, largest: f64) -> Self {
+        if largest > 0.0 && largest.is_finite() {
+            *self * (1.0 / largest)
+        } else {
+            *self
         }
     }
 }
@@ -230,6 +242,20 @@ mod tests {
         assert!((v[0] - 0.3).abs() < 1e-12 && (v[1] + 0.2).abs() < 1e-12);
         assert!((v[2] - 0.5).abs() < 1e-12);
         assert!(q.anisotropy() < 1e-12);
+    }
+
+    #[test]
+    fn one_decomposition_gives_the_point_and_the_scale() {
+        let q = Quadric::from_a_vstar(
+            Quadric::a_from_upper([1.5, 0.3, -0.2, 0.8, 0.1, 0.05]),
+            [0.2, -0.4, 0.7],
+        );
+        let (v, largest) = q.optimal_point_and_scale([0.1, 0.1, 0.1], SVD_CUTOFF);
+        assert_eq!(v, q.optimal_point([0.1, 0.1, 0.1], SVD_CUTOFF));
+        assert!((largest - q.largest_eigenvalue()).abs() < 1e-12 * largest);
+        let n = q.scaled_by_largest(largest);
+        assert!((n.largest_eigenvalue() - 1.0).abs() < 1e-12);
+        assert_eq!(Quadric::zero().scaled_by_largest(0.0), Quadric::zero());
     }
 
     #[test]

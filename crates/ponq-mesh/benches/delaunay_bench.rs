@@ -15,30 +15,32 @@ fn main() {
     };
     let threads = rayon::current_num_threads();
     println!(
-        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point |"
+        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | deferred |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     let row = |name: &str, pts: &[[f64; 3]]| {
         let time = |workers: usize| {
             let mut best = f64::MAX;
             let mut tets = 0;
+            let mut deferred = 0;
             for _ in 0..5 {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers).expect("finite points");
                 best = best.min(t.elapsed().as_secs_f64());
                 tets = dt.tets.len();
+                deferred = dt.stats.deferred;
             }
-            (best, tets)
+            (best, tets, deferred)
         };
-        let (one, tets) = time(1);
-        let (all, _) = time(threads);
+        let (one, tets, _) = time(1);
+        let (all, _, deferred) = time(threads);
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {deferred} |",
             pts.len(),
             one * 1e3,
             one * 1e6 / pts.len() as f64,
             all * 1e3,
-            all * 1e6 / pts.len() as f64
+            all * 1e6 / pts.len() as f64,
         );
     };
     for n in [10_000usize, 100_000, 400_000] {

@@ -40,6 +40,40 @@ pub struct Delaunay {
     pub tets: Vec<[u32; 4]>,
     /// `neighbors[t][k]`: the tet across the face opposite vertex `k` of `t`, or [`NONE`].
     pub neighbors: Vec<[u32; 4]>,
+    /// How the triangulation was built.
+    pub stats: DelaunayStats,
+}
+
+/// How a [`Delaunay`] was built (for benchmarks and tests; the tets never depend on it).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DelaunayStats {
+    /// Worker threads of the parallel phase (1: all insertions by one thread).
+    pub workers: usize,
+    /// Vertices inserted by the parallel phase.
+    pub parallel_insertions: usize,
+    /// Vertices a worker backed off from (a tet it needed was held by another worker) and
+    /// that were inserted afterwards by one thread.
+    pub deferred: usize,
+}
+
+/// Options of [`Delaunay::with_options`].
+#[derive(Debug, Clone, Copy)]
+pub struct DelaunayOptions {
+    /// At most this many worker threads (of the current rayon pool); inputs under 8192
+    /// points use one.
+    pub threads: usize,
+    /// Testing aid: make every `n`-th lock attempt of the parallel phase fail as if another
+    /// worker held the tet, so that the back-off path runs (0: never).
+    pub fail_every_nth_lock: u32,
+}
+
+impl Default for DelaunayOptions {
+    fn default() -> Self {
+        Self {
+            threads: rayon::current_num_threads(),
+            fail_every_nth_lock: 0,
+        }
+    }
 }
 
 /// SplitMix64: a tiny deterministic generator for the insertion order and walk.
@@ -170,6 +204,20 @@ impl Delaunay {
     /// # Errors
     /// As [`Delaunay::new`].
     pub fn with_threads(points: &[[f64; 3]], threads: usize) -> Result<Self> {
+        Self::with_options(
+            points,
+            &DelaunayOptions {
+                threads,
+                ..Default::default()
+            },
+        )
+    }
+
+    /// [`Delaunay::new`] with options.
+    ///
+    /// # Errors
+    /// As [`Delaunay::new`].
+    pub fn with_options(points: &[[f64; 3]], opts: &DelaunayOptions) -> Result<Self> {
         use rayon::prelude::*;
         if points.len() >= (1usize << 31) - 8 {
             return Err(Error::InvalidInput(format!(
@@ -222,7 +270,7 @@ impl Delaunay {
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (order, rounds) = brio_order(&vertices);
         let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
-        let mut dt = Builder::new(sorted, order.clone()).run(&rounds, threads);
+        let mut dt = Builder::new(sorted, order.clone()).run(&rounds, opts);
         let mut back = vec![0u32; order.len()];
         for (new, &old) in order.iter().enumerate() {
             back[new] = old;
@@ -393,6 +441,9 @@ struct Worker {
     last: u32,
     /// Vertices this worker backed off from.
     deferred: Vec<u32>,
+    /// Testing aid: every `n`-th lock attempt fails (0: never).
+    fail_every: u32,
+    lock_attempts: u32,
     rng: SplitMix,
     stack: Vec<u32>,
     cavity: Vec<u32>,
@@ -415,6 +466,8 @@ impl Worker {
             fresh: (0, 0),
             last: 0,
             deferred: Vec::new(),
+            fail_every: 0,
+            lock_attempts: 0,
             rng: SplitMix(seed),
             stack: Vec::new(),
             cavity: Vec::new(),
@@ -428,8 +481,17 @@ impl Worker {
     }
 
     #[inline]
-    fn try_lock<const PAR: bool>(&self, sh: &Shared, t: u32) -> bool {
-        !PAR || sh.tets[t as usize]
+    fn try_lock<const PAR: bool>(&mut self, sh: &Shared, t: u32) -> bool {
+        if !PAR {
+            return true;
+        }
+        if self.fail_every > 0 {
+            self.lock_attempts += 1;
+            if self.lock_attempts.is_multiple_of(self.fail_every) {
+                return false;
+            }
+        }
+        sh.tets[t as usize]
             .lock
             .compare_exchange(0, self.id, Acquire, Relaxed)
             .is_ok()
@@ -445,7 +507,7 @@ impl Worker {
     /// Locks a live tet to start a walk from: the last one made, or (in parallel, when
     /// another worker has removed it) one of the slots before it, which this worker filled
     /// recently.
-    fn start<const PAR: bool>(&self, sh: &Shared) -> Option<u32> {
+    fn start<const PAR: bool>(&mut self, sh: &Shared) -> Option<u32> {
         let len = sh.tets.len() as u32;
         for i in 0..256 {
             let t = (self.last + len - i % len) % len;
@@ -815,13 +877,16 @@ impl Builder {
     /// Inserts every vertex: the first BRIO rounds by one thread, the later (large) rounds by
     /// `threads` workers, each taking one stretch of every round's Hilbert order, then the
     /// vertices the workers backed off from by one thread.
-    fn run(mut self, rounds: &[usize], threads: usize) -> Delaunay {
+    fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> Delaunay {
         let n = self.n_real as usize;
         let mut main = Worker::new(1, 12345);
-        let threads = threads.clamp(1, 64);
+        let threads = opts.threads.clamp(1, 64);
         if threads == 1 || n < PARALLEL_MIN_POINTS {
             self.insert_sequential(&mut main, 0..self.n_real);
-            return self.finish();
+            return self.finish(DelaunayStats {
+                workers: 1,
+                ..Default::default()
+            });
         }
         // Sequential prefix: enough points that the workers' regions hardly interact.
         let prefix_min = (n / 64).max(512 * threads);
@@ -852,6 +917,9 @@ impl Builder {
         let mut workers: Vec<Worker> = (0..threads)
             .map(|i| Worker::new(i as u32 + 2, 0x9E37 + i as u64))
             .collect();
+        for w in &mut workers {
+            w.fail_every = opts.fail_every_nth_lock;
+        }
         for (w, list) in workers.iter_mut().zip(&lists) {
             // Start each worker in its own region: at the tet holding its first vertex.
             w.last = main.last;
@@ -897,11 +965,16 @@ impl Builder {
                 .unwrap_or(0);
         }
         deferred.sort_unstable();
+        let stats = DelaunayStats {
+            workers: threads,
+            parallel_insertions: lists.iter().map(Vec::len).sum(),
+            deferred: deferred.len(),
+        };
         self.insert_sequential(&mut main, deferred);
-        self.finish()
+        self.finish(stats)
     }
 
-    fn finish(self) -> Delaunay {
+    fn finish(self, stats: DelaunayStats) -> Delaunay {
         use rayon::prelude::*;
         let n = self.n_real;
         let live: Vec<bool> = self
@@ -939,6 +1012,7 @@ impl Builder {
             vertex_of_point: Vec::new(),
             tets,
             neighbors,
+            stats,
         }
     }
 }

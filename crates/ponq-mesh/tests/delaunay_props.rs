@@ -1,6 +1,6 @@
 //! Properties of the exact Delaunay tetrahedralisation on random, degenerate and lattice inputs.
 
-use ponq_mesh::delaunay::{Delaunay, NONE};
+use ponq_mesh::delaunay::{Delaunay, DelaunayOptions, NONE};
 use ponq_mesh::predicates::{insphere, orient3d};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -306,21 +306,49 @@ fn parallel_insertion_gives_the_same_triangulation() {
     inputs.push(("lattice", lattice));
     // A coarse grid-snapped cloud: duplicates and ties everywhere.
     let snapped: Vec<[f64; 3]> = (0..15_000)
-        .map(|_| [0, 1, 2].map(|_| rng.random_range(-10i32..=10) as f64 / 10.0))
+        .map(|_| [0, 1, 2].map(|_| rng.random_range(-20i32..=20) as f64 / 20.0))
         .collect();
     inputs.push(("snapped", snapped));
     for (name, pts) in &inputs {
         let one = Delaunay::with_threads(pts, 1).unwrap();
         let reference = canonical(&one);
         assert!(!reference.is_empty());
+        assert_eq!(one.stats.workers, 1);
+        if *name == "snapped" {
+            assert!(
+                one.vertices.len() < pts.len(),
+                "the snapped cloud has duplicates"
+            );
+        }
         for threads in [2, 3, 8] {
             let par = Delaunay::with_threads(pts, threads).unwrap();
+            assert_eq!(par.stats.workers, threads);
+            assert!(par.stats.parallel_insertions > pts.len() / 4);
             check_structure(&par);
             assert_eq!(par.vertex_of_point, one.vertex_of_point, "{name}");
             assert_eq!(
                 canonical(&par),
                 reference,
                 "{name}: {threads} workers differ from one"
+            );
+        }
+        // Workers that keep finding tets busy back off, undo their stamps and locks, and
+        // leave those vertices to the end: the triangulation must not change.
+        for every in [5, 37, 401] {
+            let opts = DelaunayOptions {
+                threads: 2,
+                fail_every_nth_lock: every,
+            };
+            let par = Delaunay::with_options(pts, &opts).unwrap();
+            assert!(
+                par.stats.deferred > 0,
+                "{name}: no back-off with every={every}"
+            );
+            check_structure(&par);
+            assert_eq!(
+                canonical(&par),
+                reference,
+                "{name}: backing off every {every} locks changed the result"
             );
         }
         check_locally_delaunay(&one);

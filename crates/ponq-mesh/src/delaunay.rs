@@ -8,6 +8,13 @@
 //! insphere tests with Devillers-Teillaud symbolic perturbation, so co-spherical and coplanar
 //! inputs (lattices) give a valid triangulation with no flat tetrahedron and no jitter.
 //!
+//! Parallel insertion: after the first BRIO rounds, each worker thread takes one stretch of
+//! every later round's Hilbert order (so the workers are far apart in space) and inserts its
+//! vertices with try-locks on the tets it walks through, removes and touches. A worker that
+//! finds a tet busy undoes its stamps and locks and leaves the vertex for a final
+//! one-thread pass. The perturbed Delaunay triangulation is unique, so the result is the same
+//! tets for any number of workers and any timing (tested, with injected lock failures too).
+//!
 //! ```
 //! use ponq_mesh::delaunay::Delaunay;
 //! let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]];
@@ -271,18 +278,54 @@ impl Delaunay {
         let (order, rounds) = brio_order(&vertices);
         let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
         let mut dt = Builder::new(sorted, order.clone()).run(&rounds, opts);
-        let mut back = vec![0u32; order.len()];
-        for (new, &old) in order.iter().enumerate() {
-            back[new] = old;
-        }
-        for tet in &mut dt.tets {
-            for v in tet.iter_mut() {
-                *v = back[*v as usize];
-            }
-        }
+        dt.tets
+            .par_iter_mut()
+            .for_each(|tet| *tet = tet.map(|v| order[v as usize]));
+        dt.canonicalize();
         dt.vertices = vertices;
         dt.vertex_of_point = vertex_of_point;
         Ok(dt)
+    }
+
+    /// Puts the tets in a canonical form, so that the output does not depend on the worker
+    /// count or timing (where the slots of the arena went): each tet starts at its smallest
+    /// vertex, followed by the smaller of the next two in cyclic order (even permutations
+    /// only, so orientations are kept), and the tets are sorted by their vertices.
+    fn canonicalize(&mut self) {
+        use rayon::prelude::*;
+        // Even permutations bringing position i to the front: double transpositions.
+        const TO_FRONT: [[usize; 4]; 4] = [[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]];
+        // Cyclic rotations of positions 1..3.
+        const ROTATE: [[usize; 4]; 3] = [[0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]];
+        self.tets
+            .par_iter_mut()
+            .zip(self.neighbors.par_iter_mut())
+            .for_each(|(tv, tn)| {
+                let i = (0..4).min_by_key(|&k| tv[k]).unwrap_or(0);
+                let p = TO_FRONT[i];
+                let (v, n) = (p.map(|k| tv[k]), p.map(|k| tn[k]));
+                let j = (1..4).min_by_key(|&k| v[k]).unwrap_or(1) - 1;
+                let r = ROTATE[j];
+                *tv = r.map(|k| v[k]);
+                *tn = r.map(|k| n[k]);
+            });
+        let mut perm: Vec<u32> = (0..self.tets.len() as u32).collect();
+        let tets = &self.tets;
+        perm.par_sort_unstable_by_key(|&t| tets[t as usize]);
+        let mut new_id = vec![0u32; perm.len()];
+        for (new, &old) in perm.iter().enumerate() {
+            new_id[old as usize] = new as u32;
+        }
+        let (tets, neighbors): (Vec<[u32; 4]>, Vec<[u32; 4]>) = perm
+            .par_iter()
+            .map(|&t| {
+                let n = self.neighbors[t as usize]
+                    .map(|x| if x == NONE { NONE } else { new_id[x as usize] });
+                (self.tets[t as usize], n)
+            })
+            .unzip();
+        self.tets = tets;
+        self.neighbors = neighbors;
     }
 
     /// For every vertex, one tet incident to it (or [`NONE`] for a vertex in no tet).

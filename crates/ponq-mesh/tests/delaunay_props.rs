@@ -331,6 +331,9 @@ fn parallel_insertion_gives_the_same_triangulation() {
                 reference,
                 "{name}: {threads} workers differ from one"
             );
+            // Not only the same tets: the same arrays, whatever the timing.
+            assert_eq!(par.tets, one.tets, "{name}: tet order differs");
+            assert_eq!(par.neighbors, one.neighbors, "{name}: neighbours differ");
         }
         // Workers that keep finding tets busy back off, undo their stamps and locks, and
         // leave those vertices to the end: the triangulation must not change.

@@ -266,3 +266,38 @@ fn bad_options_are_errors_not_panics() {
     };
     assert!(mesh_ponq(&p, &o).is_err());
 }
+
+#[test]
+fn output_is_the_same_for_any_thread_count() {
+    // Above the size where the Delaunay stage runs on several workers: the mesh, down to the
+    // order of its vertices and faces, must not depend on the threads or their timing.
+    let mut r = rng(21);
+    let mut s = box_samples([-0.6, -0.5, -0.4], [0.55, 0.5, 0.45], 150_000, &mut r);
+    let ball = sphere_samples([0.4, 0.3, 0.3], 0.35, 100_000, &mut r);
+    s.points.extend(ball.points);
+    s.normals.extend(ball.normals);
+    let ponq = ponq_by_grid(&s, 72);
+    assert!(ponq.len() > 9000, "{} points", ponq.len());
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("thread pool")
+            .install(|| mesh(&ponq, 72.0))
+    };
+    let one = run(1);
+    assert_valid(&one, "box and ball");
+    for threads in [2, 4] {
+        let out = run(threads);
+        // (assert! rather than assert_eq!: a failure would print whole meshes.)
+        assert!(
+            out.mesh.vertices == one.mesh.vertices,
+            "{threads} threads: vertices"
+        );
+        assert!(out.mesh.faces == one.mesh.faces, "{threads} threads: faces");
+        assert!(
+            out.source_point == one.source_point,
+            "{threads} threads: sources"
+        );
+    }
+}

@@ -281,51 +281,9 @@ impl Delaunay {
         dt.tets
             .par_iter_mut()
             .for_each(|tet| *tet = tet.map(|v| order[v as usize]));
-        dt.canonicalize();
         dt.vertices = vertices;
         dt.vertex_of_point = vertex_of_point;
         Ok(dt)
-    }
-
-    /// Puts the tets in a canonical form, so that the output does not depend on the worker
-    /// count or timing (where the slots of the arena went): each tet starts at its smallest
-    /// vertex, followed by the smaller of the next two in cyclic order (even permutations
-    /// only, so orientations are kept), and the tets are sorted by their vertices.
-    fn canonicalize(&mut self) {
-        use rayon::prelude::*;
-        // Even permutations bringing position i to the front: double transpositions.
-        const TO_FRONT: [[usize; 4]; 4] = [[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]];
-        // Cyclic rotations of positions 1..3.
-        const ROTATE: [[usize; 4]; 3] = [[0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]];
-        self.tets
-            .par_iter_mut()
-            .zip(self.neighbors.par_iter_mut())
-            .for_each(|(tv, tn)| {
-                let i = (0..4).min_by_key(|&k| tv[k]).unwrap_or(0);
-                let p = TO_FRONT[i];
-                let (v, n) = (p.map(|k| tv[k]), p.map(|k| tn[k]));
-                let j = (1..4).min_by_key(|&k| v[k]).unwrap_or(1) - 1;
-                let r = ROTATE[j];
-                *tv = r.map(|k| v[k]);
-                *tn = r.map(|k| n[k]);
-            });
-        let mut perm: Vec<u32> = (0..self.tets.len() as u32).collect();
-        let tets = &self.tets;
-        perm.par_sort_unstable_by_key(|&t| tets[t as usize]);
-        let mut new_id = vec![0u32; perm.len()];
-        for (new, &old) in perm.iter().enumerate() {
-            new_id[old as usize] = new as u32;
-        }
-        let (tets, neighbors): (Vec<[u32; 4]>, Vec<[u32; 4]>) = perm
-            .par_iter()
-            .map(|&t| {
-                let n = self.neighbors[t as usize]
-                    .map(|x| if x == NONE { NONE } else { new_id[x as usize] });
-                (self.tets[t as usize], n)
-            })
-            .unzip();
-        self.tets = tets;
-        self.neighbors = neighbors;
     }
 
     /// For every vertex, one tet incident to it (or [`NONE`] for a vertex in no tet).
@@ -811,6 +769,37 @@ impl Worker {
     }
 }
 
+/// Even permutations of a tet's four positions: `EVEN_PERMS[3 * i + j]` brings position `i`
+/// to the front (a double transposition) and then rotates the other three by `j`.
+const EVEN_PERMS: [[usize; 4]; 12] = {
+    const TO_FRONT: [[usize; 4]; 4] = [[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]];
+    const ROTATE: [[usize; 4]; 3] = [[0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]];
+    let mut p = [[0usize; 4]; 12];
+    let mut i = 0;
+    while i < 4 {
+        let mut j = 0;
+        while j < 3 {
+            let mut k = 0;
+            while k < 4 {
+                p[3 * i + j][k] = TO_FRONT[i][ROTATE[j][k]];
+                k += 1;
+            }
+            j += 1;
+        }
+        i += 1;
+    }
+    p
+};
+
+/// Index into [`EVEN_PERMS`] of the even permutation that puts the smallest vertex of `tv`
+/// first and the smaller of the next two second.
+fn canonical_rotation(tv: [u32; 4]) -> u8 {
+    let i = (0..4).min_by_key(|&k| tv[k]).unwrap_or(0);
+    let front = EVEN_PERMS[3 * i].map(|k| tv[k]);
+    let j = (1..4).min_by_key(|&k| front[k]).unwrap_or(1) - 1;
+    (3 * i + j) as u8
+}
+
 struct Builder {
     /// Real vertices (in insertion order) followed by the 4 super-tetrahedron vertices.
     pos: Vec<[f64; 3]>,
@@ -1017,37 +1006,109 @@ impl Builder {
         self.finish(stats)
     }
 
+    /// The tets of real vertices in a canonical form, so that the output does not depend on the
+    /// worker count or timing (which arena slots the tets went to): each tet starts at its
+    /// smallest vertex (insertion numbering), followed by the smaller of the next two in cyclic
+    /// order (even permutations only, so orientations are kept); the tets are sorted by their
+    /// vertices, which also keeps tets of one region together.
     fn finish(self, stats: DelaunayStats) -> Delaunay {
         use rayon::prelude::*;
+        const NO: u8 = u8::MAX;
         let n = self.n_real;
-        let live: Vec<bool> = self
+        let rot: Vec<u8> = self
             .tets
             .par_iter()
-            .map(|tet| tet.mark() != DEAD && tet.verts().iter().all(|&v| v < n))
-            .collect();
-        let mut remap = vec![NONE; self.tets.len()];
-        let mut count = 0u32;
-        for (t, &l) in live.iter().enumerate() {
-            if l {
-                remap[t] = count;
-                count += 1;
-            }
-        }
-        let kept: Vec<u32> = (0..self.tets.len() as u32)
-            .filter(|&t| live[t as usize])
-            .collect();
-        let tets: Vec<[u32; 4]> = kept
-            .par_iter()
-            .map(|&t| self.tets[t as usize].verts())
-            .collect();
-        let neighbors: Vec<[u32; 4]> = kept
-            .par_iter()
-            .map(|&t| {
-                self.tets[t as usize]
-                    .nbrs()
-                    .map(|x| if x == NONE { NONE } else { remap[x as usize] })
+            .map(|tet| {
+                let tv = tet.verts();
+                if tet.mark() == DEAD || tv.iter().any(|&v| v >= n) {
+                    NO
+                } else {
+                    canonical_rotation(tv)
+                }
             })
             .collect();
+        let first = |s: usize| self.tets[s].v[EVEN_PERMS[rot[s] as usize][0]].load(Relaxed);
+        // Counting sort by first vertex, one vertex range per thread (each scans the arena in
+        // order and writes only its own part), then each small bucket by the other vertices.
+        let parts = rayon::current_num_threads().clamp(1, 16);
+        let bounds: Vec<u32> = (0..=parts)
+            .map(|i| (n as usize * i / parts) as u32)
+            .collect();
+        let counts: Vec<Vec<u32>> = (0..parts)
+            .into_par_iter()
+            .map(|c| {
+                let (lo, hi) = (bounds[c], bounds[c + 1]);
+                let mut cnt = vec![0u32; (hi - lo) as usize];
+                for (s, &r) in rot.iter().enumerate() {
+                    if r != NO {
+                        let f = first(s);
+                        if f >= lo && f < hi {
+                            cnt[(f - lo) as usize] += 1;
+                        }
+                    }
+                }
+                cnt
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(n as usize + 1);
+        offsets.push(0u32);
+        for &c in counts.iter().flatten() {
+            offsets.push(offsets[offsets.len() - 1] + c);
+        }
+        // (rotated vertices, slot), bucketed by first vertex.
+        let mut sorted: Vec<([u32; 4], u32)> = vec![([0; 4], 0); offsets[n as usize] as usize];
+        let mut slices = Vec::with_capacity(parts);
+        let mut rest = &mut sorted[..];
+        for c in 0..parts {
+            let len = (offsets[bounds[c + 1] as usize] - offsets[bounds[c] as usize]) as usize;
+            let (a, b) = rest.split_at_mut(len);
+            slices.push((c, a));
+            rest = b;
+        }
+        slices.into_par_iter().for_each(|(c, slice)| {
+            let (lo, hi) = (bounds[c], bounds[c + 1]);
+            let base = offsets[lo as usize];
+            let mut fill: Vec<u32> = offsets[lo as usize..hi as usize]
+                .iter()
+                .map(|o| o - base)
+                .collect();
+            for (s, &r) in rot.iter().enumerate() {
+                if r != NO {
+                    let f = first(s);
+                    if f >= lo && f < hi {
+                        let tv = self.tets[s].verts();
+                        let key = EVEN_PERMS[r as usize].map(|k| tv[k]);
+                        slice[fill[(f - lo) as usize] as usize] = (key, s as u32);
+                        fill[(f - lo) as usize] += 1;
+                    }
+                }
+            }
+            for v in lo..hi {
+                let (a, b) = (
+                    (offsets[v as usize] - base) as usize,
+                    (offsets[v as usize + 1] - base) as usize,
+                );
+                if b - a > 1 {
+                    slice[a..b].sort_unstable();
+                }
+            }
+        });
+        let mut new_id = vec![NONE; self.tets.len()];
+        for (i, it) in sorted.iter().enumerate() {
+            new_id[it.1 as usize] = i as u32;
+        }
+        let (tets, neighbors): (Vec<[u32; 4]>, Vec<[u32; 4]>) = sorted
+            .par_iter()
+            .map(|&(key, s)| {
+                let p = EVEN_PERMS[rot[s as usize] as usize];
+                let tet = &self.tets[s as usize];
+                let nb = p.map(|k| {
+                    let x = tet.n[k].load(Relaxed);
+                    if x == NONE { NONE } else { new_id[x as usize] }
+                });
+                (key, nb)
+            })
+            .unzip();
         let mut vertices = self.pos;
         vertices.truncate(n as usize);
         Delaunay {

@@ -50,10 +50,12 @@ pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
     let mz = fmax(fmax(bz.abs(), cz.abs()), dz.abs());
     let lo = fmin(fmin(mx, my), mz);
     let hi = fmax(fmax(mx, my), mz);
-    // Error bound of this evaluation (differences included) is below 6e-15 * mx*my*mz
-    // (CGAL's static filter has 5.11e-15 for the same expression); 2e-14 leaves a margin.
+    // Error bound: each of the 6 expanded monomials is at most mx*my*mz and goes through at
+    // most 8 roundings (difference 1, minor 3, outer product 2, sums 2), so
+    // |error| <= 6 * gamma_8 * mx*my*mz < 5.4e-15 * mx*my*mz (u = 2^-53; CGAL's filter for
+    // the same expression has 5.11e-15). 8e-15 leaves a margin.
     if lo > 1e-60 && hi < 1e60 {
-        let eps = 2e-14 * mx * my * mz;
+        let eps = 8e-15 * mx * my * mz;
         if det > eps {
             return 1;
         }
@@ -89,7 +91,7 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
 }
 
 /// [`insphere`] with a static error bound tried first: `static_eps` must be at least
-/// `1e-12 * D^5` where `D` bounds every coordinate difference of the five points (see
+/// `2e-13 * D^5` where `D` bounds every coordinate difference of the five points (see
 /// [`static_insphere_bound`]); `f64::INFINITY` disables it.
 #[inline]
 pub fn insphere_bounded(
@@ -133,11 +135,14 @@ pub fn insphere_bounded(
     let mz = fmax(fmax(az.abs(), bz.abs()), fmax(cz.abs(), dz.abs()));
     let lo = fmin(fmin(mx, my), mz);
     let hi = fmax(fmax(mx, my), mz);
-    // Every one of the 24 Leibniz terms is at most mx*my*mz*3*hi^2 and carries a relative
-    // error of a few ulps (differences included), so |error| < 3e-13 * mx*my*mz*hi^2;
-    // CGAL's static filter uses 1.25e-13 for this determinant. 1e-12 leaves a margin.
+    // Error bound: expanded, the determinant is 72 monomials (24 Leibniz terms, the lift a
+    // sum of 3 squares), each at most mx*my*mz*hi^2, and each goes through at most 16
+    // roundings (differences 1+2, square 1, lift sums 2, 2x2 minor 2, 3x3 minor 3, lifted
+    // products 1, final sums 2 ... counted along the longest path: gamma_16). So
+    // |error| <= 72 * gamma_16 * mx*my*mz*hi^2 < 1.3e-13 * mx*my*mz*hi^2 (CGAL's filter for
+    // this determinant: 1.25e-13). 2e-13 leaves a margin.
     if lo > 1e-40 && hi < 1e40 {
-        let eps = 1e-12 * mx * my * mz * hi * hi;
+        let eps = 2e-13 * mx * my * mz * hi * hi;
         if det > eps {
             return -1;
         }
@@ -169,7 +174,7 @@ fn insphere_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f
 /// error analysis holds without underflow or overflow.
 pub fn static_insphere_bound(extent: f64) -> f64 {
     if extent > 1e-50 && extent < 1e40 {
-        1e-12 * extent.powi(5)
+        2e-13 * extent.powi(5)
     } else {
         f64::INFINITY
     }
@@ -307,8 +312,27 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
-        for i in 0..20000 {
+        for i in 0..60000 {
             let mut p: [[f64; 3]; 5] = std::array::from_fn(|_| [r(), r(), r()]);
+            if i % 6 == 4 {
+                // On a sphere up to rounding: the insphere determinant is a few ulps of its
+                // terms, right at the filters' bounds.
+                let c = [r() * 0.5, r() * 0.5, r() * 0.5];
+                let rad = 0.2 + 0.3 * r().abs();
+                for q in &mut p {
+                    let d = [r(), r(), r()];
+                    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-9);
+                    *q = [0, 1, 2].map(|k| c[k] + rad * d[k] / l);
+                }
+            }
+            if i % 6 == 5 {
+                // On a plane up to rounding: orient3d of the first four is nearly zero.
+                let (u, v, o) = ([r(), r(), r()], [r(), r(), r()], [r(), r(), r()]);
+                for q in &mut p[..4] {
+                    let (s, t) = (r(), r());
+                    *q = [0, 1, 2].map(|k| o[k] + s * u[k] + t * v[k]);
+                }
+            }
             if i % 4 == 1 {
                 // Nearly co-spherical / coplanar: e close to a's mirror or on a lattice.
                 p[4] = [p[0][0] + 1e-17, p[0][1], p[0][2] * (1.0 + 1e-16)];

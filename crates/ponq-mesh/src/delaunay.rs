@@ -1055,17 +1055,25 @@ impl Builder {
         for &c in counts.iter().flatten() {
             offsets.push(offsets[offsets.len() - 1] + c);
         }
-        // (rotated vertices, slot), bucketed by first vertex.
-        let mut sorted: Vec<([u32; 4], u32)> = vec![([0; 4], 0); offsets[n as usize] as usize];
-        let mut slices = Vec::with_capacity(parts);
-        let mut rest = &mut sorted[..];
+        // Fill the output arrays bucket by bucket (the rotated vertices, the rotated neighbour
+        // slots, the slot), each thread its own vertex range; sort each small bucket; then
+        // map the neighbour slots to output positions. The output arrays are the only big
+        // allocations (fresh pages are expensive).
+        let total = offsets[n as usize] as usize;
+        let mut tets = vec![[0u32; 4]; total];
+        let mut neighbors = vec![[0u32; 4]; total];
+        let mut slot_of = vec![0u32; total];
+        let mut parts_mut = Vec::with_capacity(parts);
+        let (mut rt, mut rn, mut rs) = (&mut tets[..], &mut neighbors[..], &mut slot_of[..]);
         for c in 0..parts {
             let len = (offsets[bounds[c + 1] as usize] - offsets[bounds[c] as usize]) as usize;
-            let (a, b) = rest.split_at_mut(len);
-            slices.push((c, a));
-            rest = b;
+            let (at, bt) = rt.split_at_mut(len);
+            let (an, bn) = rn.split_at_mut(len);
+            let (as_, bs) = rs.split_at_mut(len);
+            parts_mut.push((c, at, an, as_));
+            (rt, rn, rs) = (bt, bn, bs);
         }
-        slices.into_par_iter().for_each(|(c, slice)| {
+        parts_mut.into_par_iter().for_each(|(c, pt, pn, ps)| {
             let (lo, hi) = (bounds[c], bounds[c + 1]);
             let base = offsets[lo as usize];
             let mut fill: Vec<u32> = offsets[lo as usize..hi as usize]
@@ -1076,39 +1084,39 @@ impl Builder {
                 if r != NO {
                     let f = first(s);
                     if f >= lo && f < hi {
-                        let tv = self.tets[s].verts();
-                        let key = EVEN_PERMS[r as usize].map(|k| tv[k]);
-                        slice[fill[(f - lo) as usize] as usize] = (key, s as u32);
+                        let p = EVEN_PERMS[r as usize];
+                        let (tv, tn) = (self.tets[s].verts(), self.tets[s].nbrs());
+                        let i = fill[(f - lo) as usize] as usize;
+                        pt[i] = p.map(|k| tv[k]);
+                        pn[i] = p.map(|k| tn[k]);
+                        ps[i] = s as u32;
                         fill[(f - lo) as usize] += 1;
                     }
                 }
             }
+            let mut bucket: Vec<([u32; 4], [u32; 4], u32)> = Vec::new();
             for v in lo..hi {
                 let (a, b) = (
                     (offsets[v as usize] - base) as usize,
                     (offsets[v as usize + 1] - base) as usize,
                 );
                 if b - a > 1 {
-                    slice[a..b].sort_unstable();
+                    bucket.clear();
+                    bucket.extend((a..b).map(|i| (pt[i], pn[i], ps[i])));
+                    bucket.sort_unstable_by_key(|it| it.0);
+                    for (i, it) in (a..b).zip(&bucket) {
+                        (pt[i], pn[i], ps[i]) = *it;
+                    }
                 }
             }
         });
         let mut new_id = vec![NONE; self.tets.len()];
-        for (i, it) in sorted.iter().enumerate() {
-            new_id[it.1 as usize] = i as u32;
+        for (i, &s) in slot_of.iter().enumerate() {
+            new_id[s as usize] = i as u32;
         }
-        let (tets, neighbors): (Vec<[u32; 4]>, Vec<[u32; 4]>) = sorted
-            .par_iter()
-            .map(|&(key, s)| {
-                let p = EVEN_PERMS[rot[s as usize] as usize];
-                let tet = &self.tets[s as usize];
-                let nb = p.map(|k| {
-                    let x = tet.n[k].load(Relaxed);
-                    if x == NONE { NONE } else { new_id[x as usize] }
-                });
-                (key, nb)
-            })
-            .unzip();
+        neighbors.par_iter_mut().for_each(|nb| {
+            *nb = nb.map(|x| if x == NONE { NONE } else { new_id[x as usize] });
+        });
         let mut vertices = self.pos;
         vertices.truncate(n as usize);
         Delaunay {

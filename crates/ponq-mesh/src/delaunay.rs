@@ -924,12 +924,13 @@ impl Builder {
             });
         }
         // Sequential prefix: enough points that the workers' regions hardly interact.
+        // It ends at a round boundary (a prefix of a round covers only part of the domain),
+        // and leaves at least half of the points to the workers.
         let prefix_min = (n / 64).max(512 * threads);
-        let split = rounds
-            .iter()
-            .copied()
-            .find(|&r| r >= prefix_min)
-            .unwrap_or(n);
+        let split = match rounds.iter().copied().find(|&r| r >= prefix_min) {
+            Some(r) if r <= n / 2 => r,
+            _ => rounds.iter().copied().filter(|&r| r <= n / 2).max().unwrap_or(0),
+        };
         self.insert_sequential(&mut main, 0..split as u32);
         // Per-round stretches; alternate directions so that neighbouring workers never start a
         // round where the other one ends the previous one.

@@ -929,7 +929,12 @@ impl Builder {
         let prefix_min = (n / 64).max(512 * threads);
         let split = match rounds.iter().copied().find(|&r| r >= prefix_min) {
             Some(r) if r <= n / 2 => r,
-            _ => rounds.iter().copied().filter(|&r| r <= n / 2).max().unwrap_or(0),
+            _ => rounds
+                .iter()
+                .copied()
+                .filter(|&r| r <= n / 2)
+                .max()
+                .unwrap_or(0),
         };
         self.insert_sequential(&mut main, 0..split as u32);
         // Per-round stretches; alternate directions so that neighbouring workers never start a

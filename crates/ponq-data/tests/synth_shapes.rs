@@ -14,6 +14,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use ponq_data::synth::geom::point_triangle_dist2;
 use ponq_data::synth::{SynthOptions, SynthShape, generate};
 use ponq_mesh::bvh::{Aabb, Bvh};
+use ponq_mesh::vec3::{cross, dot, norm, sub};
 use ponq_mesh::{TriMesh, validity};
 
 const SEEDS: u64 = 220;
@@ -27,23 +28,6 @@ fn test_opts() -> SynthOptions {
         volume_samples: 20_000,
         ..Default::default()
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// Distances from `points` to the mesh surface.

@@ -3,12 +3,11 @@
 use crate::complex::{FACES, Label, TetComplex, is_outside};
 use crate::trimesh::TriMesh;
 
-/// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the
-/// used ones. Also returns, for each output vertex, its Delaunay vertex index.
-pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>) {
+/// The triangles between inside tets and outside tets (or the hull), oriented outward, as
+/// Delaunay vertex indices, in tet order.
+pub fn boundary_faces(cx: &TetComplex, labels: &[Label]) -> Vec<[u32; 3]> {
     use rayon::prelude::*;
-    let faces: Vec<[u32; 3]> = cx
-        .dt
+    cx.dt
         .tets
         .par_iter()
         .enumerate()
@@ -20,10 +19,15 @@ pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>
                 .filter(move |(k, _)| is_outside(labels, cx.neighbor(t as u32, *k)))
                 .map(move |(_, f)| f.map(|i| tv[i]))
         })
-        .collect();
+        .collect()
+}
+
+/// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the
+/// used ones. Also returns, for each output vertex, its Delaunay vertex index.
+pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>) {
     let mut mesh = TriMesh {
         vertices: cx.dt.vertices.clone(),
-        faces,
+        faces: boundary_faces(cx, labels),
     };
     let back = mesh.remove_unreferenced_vertices();
     (mesh, back)

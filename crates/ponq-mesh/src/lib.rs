@@ -42,6 +42,7 @@ pub mod score;
 pub mod tagging;
 pub mod trimesh;
 pub mod validity;
+pub mod vec3;
 
 pub use error::{Error, Result};
 pub use ponq::Ponq;

@@ -12,8 +12,9 @@
 //! group holds an already-flipped tet, an inside group is flipped outside (monotone fallback),
 //! so the inside set can only shrink from then on. Protective tets never become inside.
 
-use crate::complex::{FACES, Label, TetComplex, is_outside};
+use crate::complex::{Label, TetComplex};
 use crate::delaunay::NONE;
+use crate::extract::boundary_faces;
 use crate::score::face_scores;
 
 /// What the repair did.
@@ -178,20 +179,7 @@ fn is_one_cycle(edges: &[(u32, u32)]) -> bool {
 /// A cheap O(#faces) scan that seeds the repair.
 pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
     use rayon::prelude::*;
-    let faces: Vec<[u32; 3]> = cx
-        .dt
-        .tets
-        .par_iter()
-        .enumerate()
-        .filter(|(t, _)| labels[*t] == Label::Inside)
-        .flat_map_iter(|(t, tv)| {
-            FACES
-                .iter()
-                .enumerate()
-                .filter(move |(k, _)| is_outside(labels, cx.neighbor(t as u32, *k)))
-                .map(move |(_, f)| f.map(|i| tv[i]))
-        })
-        .collect();
+    let faces = boundary_faces(cx, labels);
     // Link edges per vertex (CSR): the edge b -> c opposite a in each face (a, b, c).
     let nv = cx.dt.vertices.len();
     let mut offsets = vec![0u32; nv + 1];

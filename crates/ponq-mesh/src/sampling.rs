@@ -5,6 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::trimesh::TriMesh;
+use crate::vec3::{cross, norm, sub};
 
 /// Oriented surface samples.
 #[derive(Debug, Clone, Default)]
@@ -15,20 +16,6 @@ pub struct SurfaceSamples {
     pub normals: Vec<[f64; 3]>,
     /// Face each sample lies on.
     pub faces: Vec<u32>,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 
 /// Area-weighted normal of face `f` (length = 2 * area).

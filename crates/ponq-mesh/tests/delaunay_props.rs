@@ -13,6 +13,14 @@ fn vol6(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> f64 {
         + u[2] * (v[0] * w[1] - v[1] * w[0])
 }
 
+/// The face of `nb` that `t` is behind (adjacency must be symmetric).
+fn back_index(dt: &Delaunay, t: usize, nb: u32) -> usize {
+    dt.neighbors[nb as usize]
+        .iter()
+        .position(|&x| x as usize == t)
+        .expect("neighbour relation is symmetric")
+}
+
 /// Structural checks; returns the total volume.
 fn check_structure(dt: &Delaunay) -> f64 {
     let p = |v: u32| &dt.vertices[v as usize];
@@ -29,10 +37,7 @@ fn check_structure(dt: &Delaunay) -> f64 {
             if nb == NONE {
                 continue;
             }
-            let back = dt.neighbors[nb as usize]
-                .iter()
-                .position(|&x| x as usize == t)
-                .expect("neighbour relation is symmetric");
+            let back = back_index(dt, t, nb);
             let mut f1: Vec<u32> = (0..4).filter(|&j| j != k).map(|j| tv[j]).collect();
             let nv = dt.tets[nb as usize];
             let mut f2: Vec<u32> = (0..4).filter(|&j| j != back).map(|j| nv[j]).collect();
@@ -242,10 +247,7 @@ fn check_locally_delaunay(dt: &Delaunay) {
             if nb == NONE {
                 continue;
             }
-            let back = dt.neighbors[nb as usize]
-                .iter()
-                .position(|&x| x as usize == t)
-                .expect("symmetric");
+            let back = back_index(dt, t, nb);
             let apex = dt.tets[nb as usize][back];
             assert!(
                 insphere(p(tv[0]), p(tv[1]), p(tv[2]), p(tv[3]), p(apex)) <= 0,

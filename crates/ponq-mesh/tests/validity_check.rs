@@ -8,6 +8,7 @@ use ponq_mesh::validity::{
     ValidityReport, check, check_topology, faces_intersect, intersecting_face_pairs,
     triangles_intersect,
 };
+use ponq_mesh::vec3::{cross, dot, sub};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -399,20 +400,6 @@ fn assert_symmetric_invariant(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
         }
     }
     r
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Floating-point separating-axis reference: `Some(false)` when some axis separates the

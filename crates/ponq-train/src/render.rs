@@ -7,6 +7,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use ponq_mesh::TriMesh;
+use ponq_mesh::vec3::{cross, dot, sub, unit};
 
 /// An RGB image.
 #[derive(Debug, Clone)]
@@ -65,24 +66,6 @@ impl Image {
         w.write_image_data(&data)?;
         Ok(())
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    if l > 0.0 { a.map(|x| x / l) } else { a }
 }
 
 /// Renders `mesh` (its points within the box `view` = (centre, half-size)) into a

@@ -133,22 +133,23 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         ..Default::default()
     };
     let t0 = Instant::now();
-    // v* (unless stored) and the normalised quadrics, from one eigen-decomposition each.
-    let (vstars, normalized): (Vec<[f64; 3]>, Vec<Quadric>) = {
+    // v* (unless stored) and the scale of each quadric (largest eigenvalue of A, see
+    // `Quadric::normalized`), from one eigen-decomposition each.
+    let (vstars, scales): (Vec<[f64; 3]>, Vec<f64>) = {
         use rayon::prelude::*;
         match &ponq.vstars {
             Some(v) => (
                 v.clone(),
-                ponq.quadrics.par_iter().map(Quadric::normalized).collect(),
+                ponq.quadrics
+                    .par_iter()
+                    .map(Quadric::largest_eigenvalue)
+                    .collect(),
             ),
             None => ponq
                 .quadrics
                 .par_iter()
                 .zip(&ponq.points)
-                .map(|(q, p)| {
-                    let (v, largest) = q.optimal_point_and_scale(*p, SVD_CUTOFF);
-                    (v, q.scaled_by_largest(largest))
-                })
+                .map(|(q, p)| q.optimal_point_and_scale(*p, SVD_CUTOFF))
                 .unzip(),
         }
     };
@@ -215,7 +216,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         for k in 0..3 {
             normals[v][k] += n[k];
         }
-        quadrics[v] += normalized[i];
+        quadrics[v] += ponq.quadrics[i].scaled_by_largest(scales[i]);
     }
     for v in 0..nv {
         normals[v] = unit(normals[v]);

@@ -280,7 +280,8 @@ impl Delaunay {
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (order, rounds) = brio_order(&vertices);
         let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
-        let mut dt = Builder::new(sorted, order.clone()).run(&rounds, opts);
+        let capacity = 8 * sorted.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
+        let mut dt = Builder::new(sorted, order.clone(), capacity)?.run(&rounds, opts);
         dt.tets
             .par_iter_mut()
             .for_each(|tet| *tet = tet.map(|v| order[v as usize]));
@@ -307,11 +308,16 @@ impl Delaunay {
 /// Worker threads share the tets; a thread reads or writes a tet only while it holds the
 /// tet's `lock` (no waiting: a busy lock makes the insertion back off). The fields are atomics
 /// so that this needs no `unsafe`; relaxed accesses are plain loads and stores.
+///
+/// All-zero bytes are a free slot ([`DEAD`], unlocked), so the arena is allocated zeroed:
+/// its pages cost nothing until a worker first uses them, and slots never used are never
+/// touched (filling a 30 MB arena up front took 20-30 ms of one thread at 100k points).
+#[derive(bytemuck::Zeroable)]
 struct Tet {
     v: [AtomicU32; 4],
     n: [AtomicU32; 4],
-    /// Insertion stamp (`2v + 1` in the cavity of vertex `v`, `2v + 2` next to it);
-    /// [`DEAD`] for a free slot.
+    /// [`DEAD`] for a free slot, else [`NO_STAMP`] or an insertion stamp (`2v + 2` in the
+    /// cavity of vertex `v`, `2v + 3` next to it).
     mark: AtomicU32,
     /// 0 when free, else the id of the worker holding the tet.
     lock: AtomicU32,
@@ -319,12 +325,7 @@ struct Tet {
 
 impl Tet {
     fn dead() -> Self {
-        Self {
-            v: [0; 4].map(AtomicU32::new),
-            n: [NONE; 4].map(AtomicU32::new),
-            mark: AtomicU32::new(DEAD),
-            lock: AtomicU32::new(0),
-        }
+        bytemuck::Zeroable::zeroed()
     }
     #[inline]
     fn verts(&self) -> [u32; 4] {
@@ -348,7 +349,10 @@ impl Tet {
     }
 }
 
-const DEAD: u32 = u32::MAX;
+/// The mark of a free slot (all-zero bytes, see [`Tet`]).
+const DEAD: u32 = 0;
+/// The mark of a live tet that carries no stamp of the insertion holding it.
+const NO_STAMP: u32 = 1;
 
 /// `OTHER_TWO[f][k]`: the two indices of `0..4` other than `f` and `k` (`f != k`).
 const OTHER_TWO: [[[usize; 2]; 4]; 4] = {
@@ -585,7 +589,7 @@ impl Worker {
     /// Undoes the stamps and locks of a failed insertion.
     fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
         for &t in &self.locked {
-            sh.tets[t as usize].set_mark(0);
+            sh.tets[t as usize].set_mark(NO_STAMP);
             self.unlock::<PAR>(sh, t);
         }
         self.locked.clear();
@@ -595,8 +599,8 @@ impl Worker {
     /// Inserts vertex `v`, or backs off leaving the triangulation unchanged.
     fn insert<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<(), Fail> {
         let t = self.locate::<PAR>(sh, v)?;
-        let in_cav = 2 * v + 1;
-        let not_cav = 2 * v + 2;
+        let in_cav = 2 * v + 2;
+        let not_cav = 2 * v + 3;
         self.cavity.clear();
         self.boundary.clear();
         self.stack.clear();
@@ -623,7 +627,7 @@ impl Worker {
                     }
                     self.locked.push(nb);
                     // A fresh lock: whatever stamp the tet has is not ours.
-                    nt.set_mark(0);
+                    nt.set_mark(NO_STAMP);
                 }
                 let mark = nt.mark();
                 if mark == in_cav {
@@ -716,7 +720,7 @@ impl Worker {
                 tet.v[q].store(tv[q], Relaxed);
                 tet.n[q].store(NONE, Relaxed);
             }
-            tet.set_mark(0);
+            tet.set_mark(NO_STAMP);
             tet.set_nbr(k as usize, nb);
             if nb != NONE {
                 sh.tets[nb as usize].set_nbr(j as usize, id);
@@ -810,11 +814,15 @@ struct Builder {
     rank: Vec<u32>,
     n_real: u32,
     static_eps: f64,
+    /// The tet arena, allocated zeroed (free slots); `tets[..used]` have been handed out.
     tets: Vec<Tet>,
+    used: usize,
 }
 
 impl Builder {
-    fn new(mut pos: Vec<[f64; 3]>, rank: Vec<u32>) -> Self {
+    /// A builder with the super-tetrahedron and a zeroed arena of `capacity` slots (more are
+    /// added when needed).
+    fn new(mut pos: Vec<[f64; 3]>, rank: Vec<u32>, capacity: usize) -> Result<Self> {
         let n_real = pos.len() as u32;
         let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
         if let Some(first) = pos.first() {
@@ -854,40 +862,50 @@ impl Builder {
         {
             tet.swap(0, 1);
         }
-        let mut tets = Vec::with_capacity(7 * pos.len() + 16);
-        let first = Tet::dead();
+        let tets: Vec<Tet> = bytemuck::allocation::try_zeroed_vec(capacity.max(1))
+            .map_err(|_| Error::InvalidInput(format!("no memory for {capacity} tetrahedra")))?;
         for k in 0..4 {
-            first.v[k].store(tet[k], Relaxed);
+            tets[0].v[k].store(tet[k], Relaxed);
+            tets[0].set_nbr(k, NONE);
         }
-        first.set_mark(0);
-        tets.push(first);
-        Self {
+        tets[0].set_mark(NO_STAMP);
+        Ok(Self {
             pos,
             rank,
             n_real,
             static_eps,
             tets,
-        }
+            used: 1,
+        })
     }
 
     fn shared(&self) -> Shared<'_> {
         Shared {
             pos: &self.pos,
             rank: &self.rank,
-            tets: &self.tets,
+            tets: &self.tets[..self.used],
             n_real: self.n_real,
             static_eps: self.static_eps,
         }
     }
 
+    /// Hands out `count` never-used slots (the arena grows when it has fewer).
+    fn reserve(&mut self, count: usize) -> (u32, u32) {
+        let end = self.used + count;
+        if end > self.tets.len() {
+            let len = end.max(self.tets.len() + self.tets.len() / 2);
+            self.tets.resize_with(len, Tet::dead);
+        }
+        let start = std::mem::replace(&mut self.used, end);
+        (start as u32, end as u32)
+    }
+
     /// Adds `count` free slots for `w`.
     fn grow(&mut self, w: &mut Worker, count: usize) {
-        let start = self.tets.len() as u32;
-        self.tets.resize_with(self.tets.len() + count, Tet::dead);
         if w.fresh.0 < w.fresh.1 {
             w.free.extend(w.fresh.0..w.fresh.1);
         }
-        w.fresh = (start, self.tets.len() as u32);
+        w.fresh = self.reserve(count);
     }
 
     /// Inserts `verts` one after the other with a single worker.
@@ -901,7 +919,7 @@ impl Builder {
                 match result {
                     Ok(()) => break,
                     Err(_) => {
-                        let count = (self.tets.len() / 2).max(1024);
+                        let count = (self.used / 2).max(1024);
                         self.grow(w, count);
                     }
                 }
@@ -970,10 +988,7 @@ impl Builder {
                     w.last = t;
                 }
             }
-            let count = 15 * list.len() / 2 + 4096;
-            let start = self.tets.len() as u32;
-            self.tets.resize_with(self.tets.len() + count, Tet::dead);
-            w.fresh = (start, self.tets.len() as u32);
+            w.fresh = self.reserve(15 * list.len() / 2 + 4096);
         }
         workers[0].free = std::mem::take(&mut main.free);
         {
@@ -1001,7 +1016,7 @@ impl Builder {
             }
         }
         if self.tets[main.last as usize].mark() == DEAD {
-            main.last = (0..self.tets.len() as u32)
+            main.last = (0..self.used as u32)
                 .find(|&t| self.tets[t as usize].mark() != DEAD)
                 .unwrap_or(0);
         }
@@ -1022,22 +1037,22 @@ impl Builder {
     /// vertices, which also keeps tets of one region together.
     fn finish(self, stats: DelaunayStats) -> Delaunay {
         use rayon::prelude::*;
-        const NO: u8 = u8::MAX;
         let n = self.n_real;
-        let rot: Vec<u8> = self
-            .tets
+        let arena = &self.tets[..self.used];
+        // The smallest vertex of each output tet; NONE for free slots and tets of the
+        // super-tetrahedron. The passes below read this array, not the 40-byte tets.
+        let first: Vec<u32> = arena
             .par_iter()
             .map(|tet| {
                 let tv = tet.verts();
                 if tet.mark() == DEAD || tv.iter().any(|&v| v >= n) {
-                    NO
+                    NONE
                 } else {
-                    canonical_rotation(tv)
+                    tv[0].min(tv[1]).min(tv[2]).min(tv[3])
                 }
             })
             .collect();
-        let first = |s: usize| self.tets[s].v[EVEN_PERMS[rot[s] as usize][0]].load(Relaxed);
-        // Counting sort by first vertex, one vertex range per thread (each scans the arena in
+        // Counting sort by first vertex, one vertex range per thread (each scans `first` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
         let bounds: Vec<u32> = (0..=parts)
@@ -1048,12 +1063,9 @@ impl Builder {
             .map(|c| {
                 let (lo, hi) = (bounds[c], bounds[c + 1]);
                 let mut cnt = vec![0u32; (hi - lo) as usize];
-                for (s, &r) in rot.iter().enumerate() {
-                    if r != NO {
-                        let f = first(s);
-                        if f >= lo && f < hi {
-                            cnt[(f - lo) as usize] += 1;
-                        }
+                for &f in &first {
+                    if f >= lo && f < hi {
+                        cnt[(f - lo) as usize] += 1;
                     }
                 }
                 cnt
@@ -1064,43 +1076,40 @@ impl Builder {
         for &c in counts.iter().flatten() {
             offsets.push(offsets[offsets.len() - 1] + c);
         }
-        // Fill the output arrays bucket by bucket (the rotated vertices, the rotated neighbour
-        // slots, the slot), each thread its own vertex range; sort each small bucket; then
-        // map the neighbour slots to output positions. The output arrays are the only big
-        // allocations (fresh pages are expensive).
+        // Fill the output arrays bucket by bucket (the rotated vertices and neighbour slots),
+        // each thread its own vertex range; sort each small bucket; record where each slot
+        // went; then map the neighbour slots to output positions.
         let total = offsets[n as usize] as usize;
         let mut tets = vec![[0u32; 4]; total];
         let mut neighbors = vec![[0u32; 4]; total];
-        let mut slot_of = vec![0u32; total];
+        // Output position + 1 of each slot (0: not in the output).
+        let new_id: Vec<AtomicU32> = bytemuck::allocation::zeroed_vec(arena.len());
         let mut parts_mut = Vec::with_capacity(parts);
-        let (mut rt, mut rn, mut rs) = (&mut tets[..], &mut neighbors[..], &mut slot_of[..]);
+        let (mut rt, mut rn) = (&mut tets[..], &mut neighbors[..]);
         for c in 0..parts {
             let len = (offsets[bounds[c + 1] as usize] - offsets[bounds[c] as usize]) as usize;
             let (at, bt) = rt.split_at_mut(len);
             let (an, bn) = rn.split_at_mut(len);
-            let (as_, bs) = rs.split_at_mut(len);
-            parts_mut.push((c, at, an, as_));
-            (rt, rn, rs) = (bt, bn, bs);
+            parts_mut.push((c, at, an));
+            (rt, rn) = (bt, bn);
         }
-        parts_mut.into_par_iter().for_each(|(c, pt, pn, ps)| {
+        parts_mut.into_par_iter().for_each(|(c, pt, pn)| {
             let (lo, hi) = (bounds[c], bounds[c + 1]);
             let base = offsets[lo as usize];
             let mut fill: Vec<u32> = offsets[lo as usize..hi as usize]
                 .iter()
                 .map(|o| o - base)
                 .collect();
-            for (s, &r) in rot.iter().enumerate() {
-                if r != NO {
-                    let f = first(s);
-                    if f >= lo && f < hi {
-                        let p = EVEN_PERMS[r as usize];
-                        let (tv, tn) = (self.tets[s].verts(), self.tets[s].nbrs());
-                        let i = fill[(f - lo) as usize] as usize;
-                        pt[i] = p.map(|k| tv[k]);
-                        pn[i] = p.map(|k| tn[k]);
-                        ps[i] = s as u32;
-                        fill[(f - lo) as usize] += 1;
-                    }
+            let mut ps = vec![0u32; pt.len()];
+            for (s, &f) in first.iter().enumerate() {
+                if f >= lo && f < hi {
+                    let (tv, tn) = (arena[s].verts(), arena[s].nbrs());
+                    let p = EVEN_PERMS[canonical_rotation(tv) as usize];
+                    let i = fill[(f - lo) as usize] as usize;
+                    pt[i] = p.map(|k| tv[k]);
+                    pn[i] = p.map(|k| tn[k]);
+                    ps[i] = s as u32;
+                    fill[(f - lo) as usize] += 1;
                 }
             }
             let mut bucket: Vec<([u32; 4], [u32; 4], u32)> = Vec::new();
@@ -1118,13 +1127,16 @@ impl Builder {
                     }
                 }
             }
+            for (i, &s) in ps.iter().enumerate() {
+                new_id[s as usize].store(base + i as u32 + 1, Relaxed);
+            }
         });
-        let mut new_id = vec![NONE; self.tets.len()];
-        for (i, &s) in slot_of.iter().enumerate() {
-            new_id[s as usize] = i as u32;
-        }
         neighbors.par_iter_mut().for_each(|nb| {
-            *nb = nb.map(|x| if x == NONE { NONE } else { new_id[x as usize] });
+            *nb = nb.map(|x| {
+                new_id
+                    .get(x as usize)
+                    .map_or(NONE, |i| i.load(Relaxed).wrapping_sub(1))
+            });
         });
         let mut vertices = self.pos;
         vertices.truncate(n as usize);

@@ -57,14 +57,39 @@ pub fn tag_all(cx: &TetComplex, small_factor: f64) -> Vec<Label> {
     let threshold = small_factor * cx.cell_size * cx.cell_size;
     // The rule only ever turns unknown tets into inside / outside ones, so a vertex that has
     // both already keeps both: only the others need the (ordered, sequential) pass below.
-    let candidates: Vec<u32> = (0..cx.dt.vertices.len() as u32)
-        .into_par_iter()
-        .filter(|&v| {
-            let inc = cx.incident(v);
-            let has = |l: Label| inc.iter().any(|&t| labels[t as usize] == l);
-            let settled = has(Label::Inside) && has(Label::Outside);
-            !cx.protective[v as usize] && !settled
-        })
+    // Which labels each vertex has (bit 0: inside, bit 1: outside), from one pass over the tets.
+    let nv = cx.dt.vertices.len();
+    let has_labels: Vec<u8> = cx
+        .dt
+        .tets
+        .par_chunks(1 << 15)
+        .zip(labels.par_chunks(1 << 15))
+        .fold(
+            || vec![0u8; nv],
+            |mut acc, (tets, labels)| {
+                for (tv, l) in tets.iter().zip(labels) {
+                    let bit = match l {
+                        Label::Inside => 1,
+                        Label::Outside => 2,
+                        Label::Unknown => continue,
+                    };
+                    for &v in tv {
+                        acc[v as usize] |= bit;
+                    }
+                }
+                acc
+            },
+        )
+        .reduce(
+            || vec![0u8; nv],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
+                a
+            },
+        );
+    // (A vertex with neither label now may get one from an earlier vertex of the pass.)
+    let candidates: Vec<u32> = (0..nv as u32)
+        .filter(|&v| !cx.protective[v as usize] && has_labels[v as usize] != 3)
         .collect();
     for v in candidates {
         let inc = cx.incident(v);

@@ -22,8 +22,8 @@
 //! assert_eq!(dt.tets.len(), 2);
 //! ```
 
-use std::sync::atomic::AtomicU32;
 use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize};
 
 use crate::error::{Error, Result};
 use crate::predicates::{in_conflict_bounded, orient3d, static_insphere_bound};
@@ -61,6 +61,9 @@ pub struct DelaunayStats {
     /// Vertices a worker backed off from (a tet it needed was held by another worker) and
     /// that were inserted afterwards by one thread.
     pub deferred: usize,
+    /// Chunks of the parallel phase inserted by a worker other than their owner (one that
+    /// had finished its own share).
+    pub stolen_chunks: usize,
 }
 
 /// Options of [`Delaunay::with_options`].
@@ -401,7 +404,16 @@ struct Shared<'a> {
     /// Static insphere bound for tets of real vertices only (their differences are bounded by
     /// the extent of the input).
     static_eps: f64,
+    /// Never-used slots for the parallel phase, handed out in blocks: the next one is
+    /// `pool.load()`, the last one `tets.len() - 1`.
+    pool: Option<&'a AtomicUsize>,
 }
+
+/// Slots a worker takes from the shared pool at a time.
+const POOL_BLOCK: usize = 2048;
+
+/// Vertices a worker claims at a time in the parallel phase (see [`Builder::run`]).
+const CHUNK: usize = 256;
 
 impl Shared<'_> {
     #[inline]
@@ -449,6 +461,8 @@ struct Worker {
     last: u32,
     /// Vertices this worker backed off from.
     deferred: Vec<u32>,
+    /// Chunks this worker took from other workers' queues.
+    stolen: usize,
     /// Testing aid: every `n`-th lock attempt fails (0: never).
     fail_every: u32,
     lock_attempts: u32,
@@ -474,6 +488,7 @@ impl Worker {
             fresh: (0, 0),
             last: 0,
             deferred: Vec::new(),
+            stolen: 0,
             fail_every: 0,
             lock_attempts: 0,
             rng: SplitMix(seed),
@@ -486,6 +501,20 @@ impl Worker {
             table: vec![(EMPTY_KEY, 0, 0); 256],
             used: Vec::new(),
         }
+    }
+
+    /// Takes a block of never-used slots from the shared pool (parallel phase only).
+    fn refill(&mut self, sh: &Shared) -> bool {
+        let Some(pool) = sh.pool else {
+            return false;
+        };
+        let start = pool.fetch_add(POOL_BLOCK, Relaxed);
+        let end = (start + POOL_BLOCK).min(sh.tets.len());
+        if start >= end {
+            return false;
+        }
+        self.fresh = (start as u32, end as u32);
+        true
     }
 
     #[inline]
@@ -566,6 +595,8 @@ impl Worker {
             // Lock the next tet before letting go of this one, so that it is still our
             // neighbour when we get it.
             if !self.try_lock::<PAR>(sh, next) {
+                // Keep the progress: the next walk starts here.
+                self.last = t;
                 self.unlock::<PAR>(sh, t);
                 return Err(Fail::Busy);
             }
@@ -665,7 +696,7 @@ impl Worker {
                 } else {
                     skipped += 1;
                 }
-            } else if self.fresh.0 < self.fresh.1 {
+            } else if self.fresh.0 < self.fresh.1 || self.refill(sh) {
                 let f = self.fresh.0;
                 self.fresh.0 += 1;
                 if PAR {
@@ -886,6 +917,7 @@ impl Builder {
             tets: &self.tets[..self.used],
             n_real: self.n_real,
             static_eps: self.static_eps,
+            pool: None,
         }
     }
 
@@ -955,56 +987,95 @@ impl Builder {
                 .unwrap_or(0),
         };
         self.insert_sequential(&mut main, 0..split as u32);
-        // Per-round stretches; alternate directions so that neighbouring workers never start a
-        // round where the other one ends the previous one.
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); threads];
+        // Per-round stretches, cut into chunks of consecutive vertices; alternate directions so
+        // that neighbouring workers never start a round where the other one ends the previous
+        // one. `queues[i]`: the chunks of worker i, in its order of work.
+        let mut queues: Vec<Vec<(u32, u32, bool)>> = vec![Vec::new(); threads];
         for (r, w) in rounds.windows(2).enumerate() {
             let (a, b) = (w[0].max(split), w[1]);
             if a >= b {
                 continue;
             }
             let len = b - a;
-            for (i, list) in lists.iter_mut().enumerate() {
+            for (i, queue) in queues.iter_mut().enumerate() {
                 let (s, e) = (a + len * i / threads, a + len * (i + 1) / threads);
+                let chunks = (s..e)
+                    .step_by(CHUNK)
+                    .map(|c| (c as u32, (c + CHUNK).min(e) as u32));
                 if r % 2 == 0 {
-                    list.extend(s as u32..e as u32);
+                    queue.extend(chunks.map(|(c, d)| (c, d, false)));
                 } else {
-                    list.extend((s as u32..e as u32).rev());
+                    queue.extend(chunks.rev().map(|(c, d)| (c, d, true)));
                 }
             }
         }
+        let parallel_insertions: usize =
+            queues.iter().flatten().map(|c| (c.1 - c.0) as usize).sum();
         let mut workers: Vec<Worker> = (0..threads)
             .map(|i| Worker::new(i as u32 + 2, 0x9E37 + i as u64))
             .collect();
-        for w in &mut workers {
+        for (w, queue) in workers.iter_mut().zip(&queues) {
             w.fail_every = opts.fail_every_nth_lock;
-        }
-        for (w, list) in workers.iter_mut().zip(&lists) {
             // Start each worker in its own region: at the tet holding its first vertex.
             w.last = main.last;
-            if let Some(&first) = list.first() {
+            if let Some(&(c, d, rev)) = queue.first() {
+                let first = if rev { d - 1 } else { c };
                 let sh = self.shared();
                 if let Ok(t) = main.locate::<false>(&sh, first) {
                     w.last = t;
                 }
             }
-            w.fresh = self.reserve(15 * list.len() / 2 + 4096);
         }
         workers[0].free = std::mem::take(&mut main.free);
+        // The slots of the parallel phase come from one pool, in blocks, so that a worker
+        // that does more than its share never runs out; slots past the last block handed out
+        // are never touched.
+        let pool_start = self.used;
+        self.reserve((15 * parallel_insertions / 2).max(POOL_BLOCK * threads) + 4096);
+        let pool = AtomicUsize::new(pool_start);
         {
             use rayon::prelude::*;
-            let sh = self.shared();
-            workers
-                .par_iter_mut()
-                .zip(lists.par_iter())
-                .for_each(|(w, list)| {
-                    for &v in list {
+            let mut sh = self.shared();
+            sh.pool = Some(&pool);
+            // Each chunk is inserted by the one worker that claims it: its owner, going
+            // forward through its queue, or (once a worker's own queue is done) a worker
+            // taking the others' chunks from the back, far from where their owners are.
+            let claimed: Vec<Vec<AtomicBool>> = queues
+                .iter()
+                .map(|q| q.iter().map(|_| AtomicBool::new(false)).collect())
+                .collect();
+            workers.par_iter_mut().enumerate().for_each(|(i, w)| {
+                let insert_chunk = |w: &mut Worker, (c, d, rev): (u32, u32, bool)| {
+                    let mut one = |v: u32| {
                         if w.insert::<true>(&sh, v).is_err() {
                             w.deferred.push(v);
                         }
+                    };
+                    if rev {
+                        (c..d).rev().for_each(&mut one);
+                    } else {
+                        (c..d).for_each(&mut one);
                     }
-                });
+                };
+                for (j, &chunk) in queues[i].iter().enumerate() {
+                    if !claimed[i][j].swap(true, Relaxed) {
+                        insert_chunk(w, chunk);
+                    }
+                }
+                for other in (1..threads).map(|k| (i + k) % threads) {
+                    // Owners claim from the front and thieves from the back, so the first
+                    // claimed chunk from the back ends the search.
+                    for (j, &chunk) in queues[other].iter().enumerate().rev() {
+                        if claimed[other][j].swap(true, Relaxed) {
+                            break;
+                        }
+                        w.stolen += 1;
+                        insert_chunk(w, chunk);
+                    }
+                }
+            });
         }
+        self.used = pool.load(Relaxed).min(self.used);
         // Gather the slots and the deferred vertices; finish with one thread.
         let mut deferred = Vec::new();
         for w in &mut workers {
@@ -1023,8 +1094,9 @@ impl Builder {
         deferred.sort_unstable();
         let stats = DelaunayStats {
             workers: threads,
-            parallel_insertions: lists.iter().map(Vec::len).sum(),
+            parallel_insertions,
             deferred: deferred.len(),
+            stolen_chunks: workers.iter().map(|w| w.stolen).sum(),
         };
         self.insert_sequential(&mut main, deferred);
         self.finish(stats)

@@ -337,6 +337,19 @@ fn parallel_insertion_gives_the_same_triangulation() {
             assert_eq!(par.tets, one.tets, "{name}: tet order differs");
             assert_eq!(par.neighbors, one.neighbors, "{name}: neighbours differ");
         }
+        // More workers than threads: a worker that finishes its own chunks before the others
+        // have started takes theirs (work stealing); the result is still the same.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("a thread pool");
+        let par = pool.install(|| Delaunay::with_threads(pts, 8).unwrap());
+        assert!(par.stats.stolen_chunks > 0, "{name}: no chunk was stolen");
+        assert_eq!(par.tets, one.tets, "{name}: stealing changed the tets");
+        assert_eq!(
+            par.neighbors, one.neighbors,
+            "{name}: stealing changed the neighbours"
+        );
         // Workers that keep finding tets busy back off, undo their stamps and locks, and
         // leave those vertices to the end: the triangulation must not change.
         for every in [5, 37, 401] {

@@ -541,33 +541,28 @@ impl Worker {
         }
     }
 
-    /// Locks a live tet to start a walk from: the last one made, or (in parallel, when
-    /// another worker has removed it) one of the slots before it, which this worker filled
-    /// recently.
-    fn start<const PAR: bool>(&mut self, sh: &Shared) -> Option<u32> {
+    /// A live tet to start a walk from: the last one made, or (in parallel, when another
+    /// worker has removed it) one of the slots before it, which this worker filled recently.
+    /// In parallel the tet is not locked, so it may be gone by the time the walk reads it;
+    /// the walk's end is checked under lock.
+    fn start<const PAR: bool>(&self, sh: &Shared) -> Option<u32> {
         let len = sh.tets.len() as u32;
-        for i in 0..256 {
-            let t = (self.last + len - i % len) % len;
-            if self.try_lock::<PAR>(sh, t) {
-                if sh.tets[t as usize].mark() != DEAD {
-                    return Some(t);
-                }
-                self.unlock::<PAR>(sh, t);
-            }
-            if !PAR {
-                break;
-            }
-        }
-        None
+        let tries = if PAR { 256 } else { 1 };
+        (0..tries)
+            .map(|i| (self.last + len - i % len) % len)
+            .find(|&t| sh.tets[t as usize].mark() != DEAD)
     }
 
-    /// Stochastic visibility walk from `self.last` to a tet containing vertex `v`; the tet is
-    /// returned locked.
-    fn locate<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<u32, Fail> {
-        let p = sh.pos[v as usize];
-        let mut t = self.start::<PAR>(sh).ok_or(Fail::Busy)?;
+    /// Stochastic visibility walk from `t` towards `p`; returns the tet where no face sees
+    /// `p` from behind. In parallel the tets are read without locks: another worker may be
+    /// changing them, so the result is only a candidate (see [`Worker::locate`]).
+    fn walk<const PAR: bool>(&mut self, sh: &Shared, mut t: u32, p: &[f64; 3]) -> Option<u32> {
         let mut prev = NONE;
-        let max_steps = 64 + 4 * sh.tets.len();
+        let max_steps = if PAR {
+            (64 + 4 * sh.tets.len()).min(1 << 16)
+        } else {
+            64 + 4 * sh.tets.len()
+        };
         for _ in 0..max_steps {
             let tet = &sh.tets[t as usize];
             let (tv, tn) = (tet.verts(), tet.nbrs());
@@ -579,7 +574,7 @@ impl Worker {
                 if nb == NONE || nb == prev {
                     continue;
                 }
-                if sh.face_sees(tv, k, &p) < 0 {
+                if sh.face_sees(tv, k, p) < 0 {
                     next = nb;
                     break;
                 }
@@ -587,34 +582,49 @@ impl Worker {
             if next == NONE {
                 // `prev` was skipped: p is strictly in front of the face we came through.
                 debug_assert!(
-                    (0..4).all(|k| sh.face_sees(tv, k, &p) >= 0),
-                    "the walk to {v} ended outside tet {t}"
+                    PAR || (0..4).all(|k| sh.face_sees(tv, k, p) >= 0),
+                    "the walk ended outside tet {t}"
                 );
-                return Ok(t);
+                return Some(t);
             }
-            // Lock the next tet before letting go of this one, so that it is still our
-            // neighbour when we get it.
-            if !self.try_lock::<PAR>(sh, next) {
-                // Keep the progress: the next walk starts here.
-                self.last = t;
-                self.unlock::<PAR>(sh, t);
-                return Err(Fail::Busy);
-            }
-            self.unlock::<PAR>(sh, t);
             prev = t;
             t = next;
         }
-        self.unlock::<PAR>(sh, t);
-        if PAR {
-            return Err(Fail::Busy);
+        None
+    }
+
+    /// A tet containing vertex `v`, returned locked. In parallel, the walk's end is locked and
+    /// then checked (live, `v` on no face's negative side); a tet that changed under the walk
+    /// makes it walk on from there.
+    fn locate<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<u32, Fail> {
+        let p = sh.pos[v as usize];
+        let mut t = self.start::<PAR>(sh).ok_or(Fail::Busy)?;
+        if !PAR {
+            if let Some(end) = self.walk::<PAR>(sh, t, &p) {
+                return Ok(end);
+            }
+            // Safety net (never expected): scan for a containing tet.
+            return Ok((0..sh.tets.len() as u32)
+                .find(|&t| {
+                    let tet = &sh.tets[t as usize];
+                    tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0)
+                })
+                .unwrap_or(t));
         }
-        // Safety net (never expected): scan for a containing tet.
-        Ok((0..sh.tets.len() as u32)
-            .find(|&t| {
-                let tet = &sh.tets[t as usize];
-                tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0)
-            })
-            .unwrap_or(t))
+        for _ in 0..4 {
+            t = self.walk::<PAR>(sh, t, &p).ok_or(Fail::Busy)?;
+            if !self.try_lock::<PAR>(sh, t) {
+                // Keep the progress: the next walk starts here.
+                self.last = t;
+                return Err(Fail::Busy);
+            }
+            let tet = &sh.tets[t as usize];
+            if tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0) {
+                return Ok(t);
+            }
+            self.unlock::<PAR>(sh, t);
+        }
+        Err(Fail::Busy)
     }
 
     /// Undoes the stamps and locks of a failed insertion.
@@ -1045,16 +1055,24 @@ impl Builder {
                 .map(|q| q.iter().map(|_| AtomicBool::new(false)).collect())
                 .collect();
             workers.par_iter_mut().enumerate().for_each(|(i, w)| {
+                // A vertex backed off from is tried again after the rest of its chunk (the
+                // other worker has usually moved on by then), and only then deferred.
                 let insert_chunk = |w: &mut Worker, (c, d, rev): (u32, u32, bool)| {
+                    let mut retry = Vec::new();
                     let mut one = |v: u32| {
                         if w.insert::<true>(&sh, v).is_err() {
-                            w.deferred.push(v);
+                            retry.push(v);
                         }
                     };
                     if rev {
                         (c..d).rev().for_each(&mut one);
                     } else {
                         (c..d).for_each(&mut one);
+                    }
+                    for v in retry {
+                        if w.insert::<true>(&sh, v).is_err() {
+                            w.deferred.push(v);
+                        }
                     }
                 };
                 for (j, &chunk) in queues[i].iter().enumerate() {

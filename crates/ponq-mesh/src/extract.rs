@@ -7,19 +7,29 @@ use crate::trimesh::TriMesh;
 /// Delaunay vertex indices, in tet order.
 pub fn boundary_faces(cx: &TetComplex, labels: &[Label]) -> Vec<[u32; 3]> {
     use rayon::prelude::*;
-    cx.dt
+    // Chunks of tets, each collected in order, then joined.
+    const CHUNK: usize = 1 << 14;
+    let parts: Vec<Vec<[u32; 3]>> = cx
+        .dt
         .tets
-        .par_iter()
-        .enumerate()
-        .filter(|(t, _)| labels[*t] == Label::Inside)
-        .flat_map_iter(|(t, tv)| {
-            FACES
-                .iter()
-                .enumerate()
-                .filter(move |(k, _)| is_outside(labels, cx.neighbor(t as u32, *k)))
-                .map(move |(_, f)| f.map(|i| tv[i]))
+        .par_chunks(CHUNK)
+        .zip(cx.dt.neighbors.par_chunks(CHUNK))
+        .zip(labels.par_chunks(CHUNK))
+        .map(|((tets, neighbors), own)| {
+            let mut faces = Vec::new();
+            for ((tv, nb), &l) in tets.iter().zip(neighbors).zip(own) {
+                if l == Label::Inside {
+                    for (k, f) in FACES.iter().enumerate() {
+                        if is_outside(labels, nb[k]) {
+                            faces.push(f.map(|i| tv[i]));
+                        }
+                    }
+                }
+            }
+            faces
         })
-        .collect()
+        .collect();
+    parts.concat()
 }
 
 /// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the

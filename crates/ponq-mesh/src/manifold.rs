@@ -180,32 +180,49 @@ fn is_one_cycle(edges: &[(u32, u32)]) -> bool {
 pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
     use rayon::prelude::*;
     let faces = boundary_faces(cx, labels);
-    // Link edges per vertex (CSR): the edge b -> c opposite a in each face (a, b, c).
+    // Per vertex range (one per thread), the link edges of its vertices: the edge b -> c
+    // opposite a in each face (a, b, c). Each thread scans all faces and checks its own
+    // vertices, so no thread waits for another and nothing is shared.
     let nv = cx.dt.vertices.len();
-    let mut offsets = vec![0u32; nv + 1];
-    for f in &faces {
-        for &v in f {
-            offsets[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..nv {
-        offsets[i + 1] += offsets[i];
-    }
-    let mut fill = offsets.clone();
-    let mut link = vec![(0u32, 0u32); offsets[nv] as usize];
-    for &[a, b, c] in &faces {
-        for (v, e) in [(a, (b, c)), (b, (c, a)), (c, (a, b))] {
-            link[fill[v as usize] as usize] = e;
-            fill[v as usize] += 1;
-        }
-    }
-    (0..nv as u32)
+    let parts = rayon::current_num_threads().clamp(1, 16);
+    let bounds: Vec<usize> = (0..=parts).map(|i| nv * i / parts).collect();
+    let found: Vec<Vec<u32>> = (0..parts)
         .into_par_iter()
-        .filter(|&v| {
-            let edges = &link[offsets[v as usize] as usize..offsets[v as usize + 1] as usize];
-            !edges.is_empty() && !is_one_cycle(edges)
+        .map(|c| {
+            let (lo, hi) = (bounds[c], bounds[c + 1]);
+            // CSR of the range: counts, offsets, then the edges.
+            let mut offsets = vec![0u32; hi - lo + 1];
+            for f in &faces {
+                for &v in f {
+                    if (lo..hi).contains(&(v as usize)) {
+                        offsets[v as usize - lo + 1] += 1;
+                    }
+                }
+            }
+            for i in 0..hi - lo {
+                offsets[i + 1] += offsets[i];
+            }
+            let mut fill = offsets.clone();
+            let mut link = vec![(0u32, 0u32); offsets[hi - lo] as usize];
+            for &[a, b, c] in &faces {
+                for (v, e) in [(a, (b, c)), (b, (c, a)), (c, (a, b))] {
+                    if (lo..hi).contains(&(v as usize)) {
+                        let i = &mut fill[v as usize - lo];
+                        link[*i as usize] = e;
+                        *i += 1;
+                    }
+                }
+            }
+            (lo..hi)
+                .filter(|&v| {
+                    let edges = &link[offsets[v - lo] as usize..offsets[v - lo + 1] as usize];
+                    !edges.is_empty() && !is_one_cycle(edges)
+                })
+                .map(|v| v as u32)
+                .collect()
         })
-        .collect()
+        .collect();
+    found.concat()
 }
 
 /// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.

@@ -191,40 +191,68 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
 
     let t2 = Instant::now();
     // Per-vertex data; duplicates of one position are merged (quadrics summed, normals averaged).
+    // Which points each vertex has (one pass over small arrays), then the data of each vertex
+    // in parallel; a protective corner's own data replaces that of points at its position.
     let nv = dt.vertices.len();
     let m = ponq.len();
-    let mut normals = vec![[0.0; 3]; nv];
-    let mut quadrics = vec![Quadric::zero(); nv];
     let mut protective = vec![false; nv];
+    let mut corner = vec![u32::MAX; nv];
     let mut source = vec![u32::MAX; nv];
     let mut sources = vec![0u32; nv];
     for (i, &v) in dt.vertex_of_point.iter().enumerate() {
         let v = v as usize;
         if i >= m {
             protective[v] = true;
-            let c = points[i];
-            normals[v] = unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]);
-            quadrics[v] = Quadric::identity_at(c);
+            corner[v] = i as u32;
             source[v] = u32::MAX;
-            continue;
-        }
-        if source[v] == u32::MAX {
-            source[v] = i as u32;
-        }
-        sources[v] += 1;
-        let n = unit(ponq.normals[i]);
-        for k in 0..3 {
-            normals[v][k] += n[k];
-        }
-        quadrics[v] += ponq.quadrics[i].scaled_by_largest(scales[i]);
-    }
-    for v in 0..nv {
-        normals[v] = unit(normals[v]);
-        // A single normalised quadric is already normalised; a sum of several is not.
-        if sources[v] > 1 {
-            quadrics[v] = quadrics[v].normalized();
+        } else {
+            if source[v] == u32::MAX {
+                source[v] = i as u32;
+            }
+            sources[v] += 1;
         }
     }
+    // The points of merged vertices, by vertex, in input order.
+    let mut merged: Vec<(u32, u32)> = (0..m)
+        .filter(|&i| sources[dt.vertex_of_point[i] as usize] > 1)
+        .map(|i| (dt.vertex_of_point[i], i as u32))
+        .collect();
+    merged.sort_by_key(|&(v, _)| v);
+    let (normals, quadrics): (Vec<[f64; 3]>, Vec<Quadric>) = {
+        use rayon::prelude::*;
+        (0..nv)
+            .into_par_iter()
+            .map(|v| {
+                let (n, q) = if corner[v] != u32::MAX {
+                    let c = points[corner[v] as usize];
+                    (
+                        unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]),
+                        Quadric::identity_at(c),
+                    )
+                } else {
+                    let (mut n, mut q) = ([0.0; 3], Quadric::zero());
+                    let mut add = |i: usize| {
+                        let ni = unit(ponq.normals[i]);
+                        for k in 0..3 {
+                            n[k] += ni[k];
+                        }
+                        q += ponq.quadrics[i].scaled_by_largest(scales[i]);
+                    };
+                    if sources[v] == 1 {
+                        add(source[v] as usize);
+                    } else {
+                        let at = merged.partition_point(|&(w, _)| (w as usize) < v);
+                        for &(_, i) in merged[at..].iter().take_while(|&&(w, _)| w as usize == v) {
+                            add(i as usize);
+                        }
+                    }
+                    (n, q)
+                };
+                // A single normalised quadric is already normalised; a sum of several is not.
+                (unit(n), if sources[v] > 1 { q.normalized() } else { q })
+            })
+            .unzip()
+    };
     stats.vertices = nv;
     stats.tets = dt.tets.len();
     let cx = TetComplex::new(

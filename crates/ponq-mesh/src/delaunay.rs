@@ -9,11 +9,14 @@
 //! inputs (lattices) give a valid triangulation with no flat tetrahedron and no jitter.
 //!
 //! Parallel insertion: after the first BRIO rounds, each worker thread takes one stretch of
-//! every later round's Hilbert order (so the workers are far apart in space) and inserts its
-//! vertices with try-locks on the tets it walks through, removes and touches. A worker that
-//! finds a tet busy undoes its stamps and locks and leaves the vertex for a final
-//! one-thread pass. The perturbed Delaunay triangulation is unique, so the result is the same
-//! tets for any number of workers and any timing (tested, with injected lock failures too).
+//! every later round's Hilbert order (so the workers are far apart in space), cut into chunks;
+//! a worker that has finished its own chunks takes the others' from the back of their queues
+//! (work stealing). It walks to each vertex without locks, then try-locks the tet it ends in
+//! (checked to contain the vertex), the cavity and the cavity's neighbours. A worker that
+//! finds a tet busy undoes its stamps and locks, tries the vertex again after its chunk, and
+//! else leaves it for a final one-thread pass. The perturbed Delaunay triangulation is unique,
+//! and the output is put in a canonical order, so the result is the same arrays for any
+//! number of workers and any timing (tested, with injected lock failures and stealing too).
 //!
 //! ```
 //! use ponq_mesh::delaunay::Delaunay;

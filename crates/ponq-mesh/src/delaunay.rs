@@ -360,25 +360,33 @@ const DEAD: u32 = 0;
 /// The mark of a live tet that carries no stamp of the insertion holding it.
 const NO_STAMP: u32 = 1;
 
-/// `OTHER_TWO[f][k]`: the two indices of `0..4` other than `f` and `k` (`f != k`).
-const OTHER_TWO: [[[usize; 2]; 4]; 4] = {
-    let mut t = [[[0usize; 2]; 4]; 4];
-    let mut f = 0;
-    while f < 4 {
-        let mut k = 0;
-        while k < 4 {
-            let mut n = 0;
-            let mut s = 0;
-            while s < 4 {
-                if s != f && s != k && n < 2 {
-                    t[f][k][n] = s;
-                    n += 1;
+/// `LINK_FACES[k]`: for a new tet made from the face opposite its vertex `k` (the new vertex
+/// at position `k`), its three other faces `f`, each with the two positions other than `f`
+/// and `k`: the edge the face shares with the next new tet.
+const LINK_FACES: [[(u8, usize, usize); 3]; 4] = {
+    let mut t = [[(0u8, 0usize, 0usize); 3]; 4];
+    let mut k = 0;
+    while k < 4 {
+        let mut n = 0;
+        let mut f = 0;
+        while f < 4 {
+            if f != k {
+                let mut e = [0usize; 2];
+                let mut m = 0;
+                let mut s = 0;
+                while s < 4 {
+                    if s != f && s != k {
+                        e[m] = s;
+                        m += 1;
+                    }
+                    s += 1;
                 }
-                s += 1;
+                t[k][n] = (f as u8, e[0], e[1]);
+                n += 1;
             }
-            k += 1;
+            f += 1;
         }
-        f += 1;
+        k += 1;
     }
     t
 };
@@ -632,9 +640,18 @@ impl Worker {
 
     /// Undoes the stamps and locks of a failed insertion.
     fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
-        for &t in &self.locked {
-            sh.tets[t as usize].set_mark(NO_STAMP);
-            self.unlock::<PAR>(sh, t);
+        if PAR {
+            for &t in &self.locked {
+                sh.tets[t as usize].set_mark(NO_STAMP);
+                self.unlock::<PAR>(sh, t);
+            }
+        } else {
+            // One thread (no locks) backs off only once the cavity is complete: its stamps
+            // are on the cavity and on the tets next to it.
+            let next_to = self.boundary.iter().map(|b| b.2).filter(|&t| t != NONE);
+            for t in self.cavity.iter().copied().chain(next_to) {
+                sh.tets[t as usize].set_mark(NO_STAMP);
+            }
         }
         self.locked.clear();
         fail
@@ -676,9 +693,6 @@ impl Worker {
                 let mark = nt.mark();
                 if mark == in_cav {
                     continue;
-                }
-                if !PAR && mark != not_cav {
-                    self.locked.push(nb);
                 }
                 if mark != not_cav && sh.conflicts(nt.verts(), v) {
                     nt.set_mark(in_cav);
@@ -775,12 +789,8 @@ impl Worker {
                 self.cavity.len(),
                 self.boundary.len()
             );
-            for f in 0..4u8 {
-                if f == k {
-                    continue;
-                }
+            for &(f, i0, i1) in &LINK_FACES[k as usize] {
                 // The face opposite f contains v and the two vertices other than f and k.
-                let [i0, i1] = OTHER_TWO[f as usize][k as usize];
                 let e = [tv[i0], tv[i1]];
                 let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
                 let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;

@@ -69,6 +69,11 @@ pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
 #[cold]
 #[inline(never)]
 fn orient3d_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
+    // Four points in one axis-aligned plane (common on CAD faces and PoNQ-lite lattices)
+    // are exactly coplanar: no need for the adaptive evaluation.
+    if (0..3).any(|k| a[k] == b[k] && a[k] == c[k] && a[k] == d[k]) {
+        return 0;
+    }
     // robust::orient3d(a, b, c, d) = det[a-d, b-d, c-d] = -det[b-a, c-a, d-a].
     let v = robust::orient3d(c3(a), c3(b), c3(c), c3(d));
     if v < 0.0 {
@@ -359,6 +364,37 @@ mod tests {
                 insphere_bounded(&p[0], &p[1], &p[2], &p[3], &p[4], bound),
                 exact
             );
+        }
+    }
+
+    /// The axis-aligned-plane shortcut of the exact orientation agrees with Shewchuk's
+    /// predicate: zero when the four points share a coordinate, the adaptive answer otherwise.
+    #[test]
+    fn points_on_an_axis_plane_are_coplanar() {
+        let mut seed = 11u64;
+        let mut r = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let robust_sign = |p: &[[f64; 3]; 4]| {
+            let v = robust::orient3d(c3(&p[0]), c3(&p[1]), c3(&p[2]), c3(&p[3]));
+            -(v.partial_cmp(&0.0).map_or(0, |o| o as i32))
+        };
+        for i in 0..20000 {
+            let mut p: [[f64; 3]; 4] = std::array::from_fn(|_| [r(), r(), r()]);
+            let (k, x) = (i % 3, r() * 1e3);
+            // All four on the plane x_k = x, or only three of them (then not coplanar).
+            for q in p.iter_mut().take(if i % 2 == 0 { 4 } else { 3 }) {
+                q[k] = x;
+            }
+            let expected = robust_sign(&p);
+            assert_eq!(orient3d(&p[0], &p[1], &p[2], &p[3]), expected);
+            assert_eq!(orient3d_exact(&p[0], &p[1], &p[2], &p[3]), expected);
+            if i % 2 == 0 {
+                assert_eq!(expected, 0);
+            }
         }
     }
 

@@ -391,8 +391,6 @@ const LINK_FACES: [[(u8, usize, usize); 3]; 4] = {
     t
 };
 
-const EMPTY_KEY: u64 = u64::MAX;
-
 /// Inputs smaller than this are triangulated by one thread.
 const PARALLEL_MIN_POINTS: usize = 8192;
 
@@ -486,9 +484,11 @@ struct Worker {
     new_tets: Vec<([u32; 4], u32, u8)>,
     /// Slots taken from `free` / `fresh` for the current insertion.
     taken: Vec<u32>,
-    /// Open-addressing table edge key -> (tet, face) for linking the new tets.
-    table: Vec<(u64, u32, u8)>,
-    used: Vec<usize>,
+    /// Open-addressing table edge key -> (tet, face, generation) for linking the new tets.
+    /// An entry belongs to the current insertion only if its generation is `generation`, so
+    /// the table is never cleared (but once every 255 insertions).
+    table: Vec<(u64, u32, u8, u8)>,
+    generation: u8,
 }
 
 impl Worker {
@@ -509,8 +509,8 @@ impl Worker {
             boundary: Vec::new(),
             new_tets: Vec::new(),
             taken: Vec::new(),
-            table: vec![(EMPTY_KEY, 0, 0); 256],
-            used: Vec::new(),
+            table: vec![(0, 0, 0, 0); 256],
+            generation: 0,
         }
     }
 
@@ -763,13 +763,17 @@ impl Worker {
         // Size the edge table (3 entries per new tet, load <= 1/2).
         let need = (6 * self.new_tets.len()).next_power_of_two().max(256);
         if self.table.len() < need {
-            self.table = vec![(EMPTY_KEY, 0, 0); need];
+            self.table = vec![(0, 0, 0, 0); need];
         }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.table.iter_mut().for_each(|e| e.3 = 0);
+            self.generation = 1;
+        }
+        let generation = self.generation;
         // Hash into the first `need` slots only: the table may have grown for one big cavity,
         // and spreading small cavities over all of it would miss the cache.
         let mask = need - 1;
-        let mut used_slots = std::mem::take(&mut self.used);
-        used_slots.clear();
         for i in 0..self.new_tets.len() {
             let (tv, id, k) = self.new_tets[i];
             let (_, _, nb, j) = self.boundary[i];
@@ -796,13 +800,12 @@ impl Worker {
                 let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
                 loop {
                     let slot = self.table[h];
-                    if slot.0 == EMPTY_KEY {
-                        self.table[h] = (key, id, f);
-                        used_slots.push(h);
+                    if slot.3 != generation {
+                        self.table[h] = (key, id, f, generation);
                         break;
                     }
                     if slot.0 == key {
-                        let (_, a, fa) = slot;
+                        let (_, a, fa, _) = slot;
                         sh.tets[a as usize].set_nbr(fa as usize, id);
                         tet.set_nbr(f as usize, a);
                         break;
@@ -811,10 +814,6 @@ impl Worker {
                 }
             }
         }
-        for &h in &used_slots {
-            self.table[h].0 = EMPTY_KEY;
-        }
-        self.used = used_slots;
         self.last = self.new_tets[0].1;
         // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
         if PAR {
@@ -974,7 +973,9 @@ impl Builder {
                 match result {
                     Ok(()) => break,
                     Err(_) => {
-                        let count = (self.used / 2).max(1024);
+                        // Half again as many slots, within the zeroed arena while it lasts.
+                        let room = self.tets.len() - self.used;
+                        let count = (self.used / 2).max(1024).min(room.max(1024));
                         self.grow(w, count);
                     }
                 }

@@ -984,8 +984,9 @@ impl Builder {
     }
 
     /// Inserts every vertex: the first BRIO rounds by one thread, the later (large) rounds by
-    /// `threads` workers, each taking one stretch of every round's Hilbert order, then the
-    /// vertices the workers backed off from by one thread.
+    /// `threads` workers, each owning one stretch of every round's Hilbert order in chunks
+    /// (and taking other workers' chunks once its own are done), then the vertices the
+    /// workers backed off from by one thread.
     fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> Delaunay {
         let n = self.n_real as usize;
         let mut main = Worker::new(1, 12345);

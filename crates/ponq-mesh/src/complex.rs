@@ -193,14 +193,11 @@ mod tests {
     /// hull vertices, on random points and on a co-spherical lattice.
     #[test]
     fn incident_is_the_star_of_each_vertex() {
-        let mut s = 7u64;
-        let mut r = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let random: Vec<[f64; 3]> = (0..400).map(|_| [r(), r(), r()]).collect();
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let random: Vec<[f64; 3]> = (0..400)
+            .map(|_| std::array::from_fn(|_| rng.random_range(0.0..1.0)))
+            .collect();
         let lattice: Vec<[f64; 3]> = (0..125)
             .map(|i| [(i % 5) as f64, (i / 5 % 5) as f64, (i / 25) as f64])
             .collect();

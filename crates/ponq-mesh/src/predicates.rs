@@ -371,13 +371,9 @@ mod tests {
     /// predicate: zero when the four points share a coordinate, the adaptive answer otherwise.
     #[test]
     fn points_on_an_axis_plane_are_coplanar() {
-        let mut seed = 11u64;
-        let mut r = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut r = || rng.random_range(-1.0..1.0);
         let robust_sign = |p: &[[f64; 3]; 4]| {
             let v = robust::orient3d(c3(&p[0]), c3(&p[1]), c3(&p[2]), c3(&p[3]));
             -(v.partial_cmp(&0.0).map_or(0, |o| o as i32))

@@ -362,7 +362,7 @@ const NO_STAMP: u32 = 1;
 
 /// `LINK_FACES[k]`: for a new tet made from the face opposite its vertex `k` (the new vertex
 /// at position `k`), its three other faces `f`, each with the two positions other than `f`
-/// and `k`: the edge the face shares with the next new tet.
+/// and `k`: the edge it shares with the neighbouring new tet across that face.
 const LINK_FACES: [[(u8, usize, usize); 3]; 4] = {
     let mut t = [[(0u8, 0usize, 0usize); 3]; 4];
     let mut k = 0;

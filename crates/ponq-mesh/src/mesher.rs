@@ -44,6 +44,43 @@ impl Default for MeshingOptions {
     }
 }
 
+impl MeshingOptions {
+    /// The domain box from six numbers `xmin, ymin, zmin, xmax, ymax, zmax` (the form the
+    /// command-line programs take), checked: six finite numbers, each max above its min.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] naming what is wrong.
+    pub fn domain_from(bounds: &[f64]) -> Result<([f64; 3], [f64; 3])> {
+        let [x0, y0, z0, x1, y1, z1] = bounds else {
+            return Err(Error::InvalidInput(format!(
+                "the box needs 6 comma-separated numbers xmin,ymin,zmin,xmax,ymax,zmax, got {bounds:?}"
+            )));
+        };
+        let (lo, hi) = ([*x0, *y0, *z0], [*x1, *y1, *z1]);
+        if (0..3).any(|k| !lo[k].is_finite() || !hi[k].is_finite() || !(hi[k] > lo[k])) {
+            return Err(Error::InvalidInput(format!(
+                "the box needs finite numbers with each max larger than its min, got {bounds:?}"
+            )));
+        }
+        Ok((lo, hi))
+    }
+
+    /// Checks an open-surface threshold (see [`MeshingOptions::open_threshold`]): anisotropy
+    /// `lambda2/lambda1` lies in `[0, 1]`, so must the threshold.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for a threshold outside `[0, 1]` or NaN.
+    pub fn check_open_threshold(t: f64) -> Result<f64> {
+        if (0.0..=1.0).contains(&t) {
+            Ok(t)
+        } else {
+            Err(Error::InvalidInput(format!(
+                "the open-surface threshold must be in [0, 1], got {t}"
+            )))
+        }
+    }
+}
+
 /// Time spent in each stage.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct StageTimes {
@@ -121,6 +158,9 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
             "grid scale must be a positive number, got {}",
             opts.grid_scale
         )));
+    }
+    if let Some(t) = opts.open_threshold {
+        MeshingOptions::check_open_threshold(t)?;
     }
     let (dlo, dhi) = opts.domain;
     if (0..3).any(|k| !(dhi[k] > dlo[k]) || !dlo[k].is_finite() || !dhi[k].is_finite()) {
@@ -312,4 +352,47 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         stats,
         message,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn boxes_and_thresholds_are_checked() {
+        let ok = MeshingOptions::domain_from(&[-1.0, -2.0, -3.0, 1.0, 2.0, 3.0]);
+        assert_eq!(ok.ok(), Some(([-1.0, -2.0, -3.0], [1.0, 2.0, 3.0])));
+        for bad in [
+            vec![],
+            vec![0.0; 5],
+            vec![0.0; 7],
+            vec![0.0, 0.0, 0.0, 1.0, 1.0, 0.0],
+            vec![0.0, 0.0, 0.0, 1.0, -1.0, 1.0],
+            vec![0.0, 0.0, f64::NAN, 1.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.0, 1.0, 1.0, f64::INFINITY],
+        ] {
+            assert!(
+                matches!(
+                    MeshingOptions::domain_from(&bad),
+                    Err(Error::InvalidInput(_))
+                ),
+                "{bad:?}"
+            );
+        }
+        for t in [0.0, 0.35, 1.0] {
+            assert_eq!(MeshingOptions::check_open_threshold(t).ok(), Some(t));
+        }
+        for t in [-0.1, 1.5, f64::NAN] {
+            assert!(MeshingOptions::check_open_threshold(t).is_err(), "{t}");
+        }
+        // The mesher refuses a bad threshold instead of culling everything or nothing.
+        let opts = MeshingOptions {
+            open_threshold: Some(2.0),
+            ..Default::default()
+        };
+        assert!(matches!(
+            mesh_ponq(&Ponq::default(), &opts),
+            Err(Error::InvalidInput(_))
+        ));
+    }
 }

@@ -37,7 +37,7 @@ struct Args {
     #[arg(long, value_name = "K", default_value_t = 0)]
     coarsen: u32,
     /// Open surface: drop the triangles whose three vertices all have quadric anisotropy
-    /// (lambda2/lambda1) above T. Without a value T = 0.35.
+    /// (lambda2/lambda1) above T, in [0, 1]. Without a value T = 0.35.
     #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
     open: Option<f64>,
     /// Domain box xmin,ymin,zmin,xmax,ymax,zmax (default -1,-1,-1,1,1,1).
@@ -61,28 +61,15 @@ struct Args {
 }
 
 fn run(args: &Args) -> Result<bool> {
-    if let Some(t) = args.open
-        && !(0.0..=1.0).contains(&t)
-    {
-        bail!("--open threshold must be in [0, 1], got {t}");
+    if let Some(t) = args.open {
+        MeshingOptions::check_open_threshold(t).context("--open")?;
     }
     if args.coarsen > 0 && !args.lite {
         bail!("--coarsen needs --lite");
     }
     let domain = match &args.bounds {
         None => ([-1.0; 3], [1.0; 3]),
-        Some(b) => {
-            if b.len() != 6 {
-                bail!(
-                    "--bounds needs 6 comma-separated numbers xmin,ymin,zmin,xmax,ymax,zmax, got {b:?}"
-                );
-            }
-            let d = ([b[0], b[1], b[2]], [b[3], b[4], b[5]]);
-            if (0..3).any(|k| !(d.1[k] > d.0[k])) {
-                bail!("--bounds: each max must be larger than its min, got {b:?}");
-            }
-            d
-        }
+        Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
     };
     let t0 = Instant::now();
     let mut ponq = io::npz::read_ponq(&args.input).context("reading the PoNQ file")?;

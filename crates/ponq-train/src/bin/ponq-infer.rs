@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
+use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::{io, validity};
 use ponq_model::backend::{BackendKind, device};
 use ponq_train::infer::{InferOptions, infer};
@@ -35,7 +36,8 @@ struct Args {
     #[arg(long, value_name = "K", default_value_t = 0)]
     coarsen: u32,
     /// Open surface: drop triangles away from sharp, planar-like quadrics (threshold T on
-    /// the anisotropy lambda2/lambda1, default 0.35). The output then has a boundary.
+    /// the anisotropy lambda2/lambda1, in [0, 1], default 0.35). The output then has a
+    /// boundary.
     #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
     open: Option<f64>,
     /// Network weights (`.bpk` with its `.json` config beside it) [default: the model
@@ -88,9 +90,7 @@ fn run(args: &Args) -> Result<Outcome> {
             .context("cannot set the thread count")?;
     }
     if let Some(t) = args.open {
-        if !(t > 0.0 && t <= 1.0) {
-            bail!("--open threshold must be in (0, 1], got {t}");
-        }
+        MeshingOptions::check_open_threshold(t).context("--open")?;
     }
     let ext = args
         .output
@@ -105,10 +105,7 @@ fn run(args: &Args) -> Result<Outcome> {
     }
     let bounds = match &args.bounds {
         None => ([-1.0; 3], [1.0; 3]),
-        Some(b) if b.len() == 6 => ([b[0], b[1], b[2]], [b[3], b[4], b[5]]),
-        Some(b) => bail!(
-            "--bounds needs 6 comma-separated numbers xmin,ymin,zmin,xmax,ymax,zmax, got {b:?}"
-        ),
+        Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
     };
     let dev = device(args.backend).map_err(anyhow::Error::msg)?;
     let t = Instant::now();

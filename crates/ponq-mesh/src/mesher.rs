@@ -235,14 +235,13 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     // in parallel; a protective corner's own data replaces that of points at its position.
     let nv = dt.vertices.len();
     let m = ponq.len();
-    let mut protective = vec![false; nv];
+    // `corner[v]`: the point of the protective corner at vertex v (u32::MAX: none).
     let mut corner = vec![u32::MAX; nv];
     let mut source = vec![u32::MAX; nv];
     let mut sources = vec![0u32; nv];
     for (i, &v) in dt.vertex_of_point.iter().enumerate() {
         let v = v as usize;
         if i >= m {
-            protective[v] = true;
             corner[v] = i as u32;
             source[v] = u32::MAX;
         } else {
@@ -299,7 +298,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         dt,
         normals,
         quadrics,
-        protective,
+        corner.iter().map(|&c| c != u32::MAX).collect(),
         cell,
         opts.grid_scale * opts.grid_scale,
     );

@@ -121,7 +121,7 @@ fn row(name: &str, m: &TriMesh, resolutions: &[usize]) {
 }
 
 fn main() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let shared = root.join("../shared/data");
     let mut meshes: Vec<(String, TriMesh)> = Vec::new();
     if let Some(m) = load(&root.join("examples/csg.obj")) {

@@ -8,7 +8,7 @@ use ponq_mesh::{TriMesh, io, validity};
 
 fn shipped(name: &str) -> TriMesh {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../examples")
+        .join("../examples")
         .join(name);
     io::read_mesh(&p).expect("shipped example mesh")
 }

@@ -135,7 +135,7 @@ fn check_grid(name: &str, m: &TriMesh, res: usize) -> SdfGrid {
 
 fn shipped(name: &str) -> TriMesh {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../examples")
+        .join("../examples")
         .join(name);
     io::read_mesh(&p).expect("shipped example mesh")
 }

@@ -80,7 +80,7 @@ fn crops_and_rotations_keep_samples_on_the_surface() {
 }
 
 fn smoke_config() -> TrainConfig {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../configs/smoke.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/smoke.toml");
     let mut cfg = TrainConfig::load(&path).expect("configs/smoke.toml parses");
     cfg.train.mesh_validate_every = 0;
     cfg
@@ -225,7 +225,7 @@ fn resume_repeats_the_uninterrupted_run() {
 #[test]
 fn cli_trains_the_smoke_config_and_rejects_bad_input() {
     let exe = env!("CARGO_BIN_EXE_ponq-train");
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let out = tmp("cli");
     let o = std::process::Command::new(exe)
         .current_dir(&root)

@@ -24,7 +24,7 @@ fn main() {
     };
     let dev = ponq_model::backend::cpu();
     let (net, cfg) = ponq_train::models::shipped(&dev).expect("shipped model");
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     println!(
         "threads: {}; model width {}, {} encoder layers, P = {}",
         rayon::current_num_threads(),

@@ -222,7 +222,7 @@ fn eval_run_matches_direct_metric_calls() {
     let data = d.join("data");
     // Shapes in sub-folders are found too.
     std::fs::create_dir_all(data.join("cad")).unwrap();
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     std::fs::copy(root.join("examples/csg.obj"), data.join("cad/csg.obj")).unwrap();
     std::fs::write(d.join("split.txt"), "csg\nnot_here\n").unwrap();
     // A tiny network keeps the test fast; the numbers checked are MC's and the summary's.
@@ -323,7 +323,7 @@ fn eval_run_matches_direct_metric_calls() {
 #[test]
 fn built_in_model_equals_the_shipped_file() {
     let dev = backend::cpu();
-    let here = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/ponq-cpu.bpk");
+    let here = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/ponq-cpu.bpk");
     let (file_net, file_cfg) = ponq_model::weights::load(&here, &dev).unwrap();
     let (emb_net, emb_cfg) = ponq_train::models::embedded(&dev).unwrap();
     assert_eq!(file_cfg.width, emb_cfg.width);

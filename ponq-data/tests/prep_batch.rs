@@ -10,7 +10,7 @@ fn batch_prepares_skips_and_resumes() {
     let input = dir.join("in");
     let out = dir.join("out");
     std::fs::create_dir_all(&input).unwrap();
-    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     std::fs::copy(examples.join("example001.obj"), input.join("part.obj")).unwrap();
     std::fs::write(input.join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
     let files = mesh_inputs(&input).unwrap();

@@ -12,8 +12,8 @@ use ponq_model::{PonqNet, PonqNetConfig};
 pub const SHIPPED: &str = "ponq-cpu.bpk";
 
 /// The shipped weights and config, built into the program.
-const EMBEDDED_WEIGHTS: &[u8] = include_bytes!("../../../models/ponq-cpu.bpk");
-const EMBEDDED_CONFIG: &str = include_str!("../../../models/ponq-cpu.json");
+const EMBEDDED_WEIGHTS: &[u8] = include_bytes!("../../models/ponq-cpu.bpk");
+const EMBEDDED_CONFIG: &str = include_str!("../../models/ponq-cpu.json");
 
 /// Files that replace the built-in model when present: `$PONQ_MODEL`, then `models/` of the
 /// source tree this program was built from (so a retrained model is picked up without a
@@ -25,7 +25,7 @@ pub fn candidates() -> Vec<PathBuf> {
     }
     v.push(
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../models")
+            .join("../models")
             .join(SHIPPED),
     );
     v

@@ -1,158 +1,192 @@
-//! A PNG plot of the loss curves of a `metrics.csv` (log-scale y), drawn by hand: a raster,
-//! Bresenham lines and the `png` encoder, so no font or system library is needed.
-//!
-//! Colours: training total loss blue, validation total loss orange; the six training terms
-//! (cd, normals, a, vstar, reg, occ) as thin grey-tinted lines. Horizontal grid lines mark
-//! the powers of ten; the legend is in the README and in the `.txt` file written beside.
+//! The loss curves of a run's `metrics.csv` as a PNG (`losses.png`), drawn with
+//! `ponq_eval::chart` (plotters, embedded font): log-scale loss against the epoch, one colour
+//! per term (total, Chamfer, normals, A, v*, regularisation, occupancy), training solid and
+//! validation dashed, with a legend; a second panel shows the meshed validation (CD, F1, NC)
+//! when the run computed it.
 
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
+use ponq_eval::chart::{self, Chart, Series};
 
-const W: usize = 800;
-const H: usize = 500;
-const MARGIN: usize = 40;
+/// Loss terms as named in `metrics.csv` (`train_<term>`, `val_<term>`), their legend text and
+/// colour.
+const TERMS: [(&str, &str, [u8; 3]); 7] = [
+    ("total", "total", [20, 20, 20]),
+    ("cd", "Chamfer", [31, 119, 180]),
+    ("normals", "normals", [44, 160, 44]),
+    ("a", "A (quadric)", [214, 39, 40]),
+    ("vstar", "v*", [148, 103, 189]),
+    ("reg", "regularisation", [140, 86, 75]),
+    ("occ", "occupancy", [255, 127, 14]),
+];
 
-struct Canvas {
-    px: Vec<[u8; 3]>,
+/// The columns of a `metrics.csv`: header and rows.
+struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
 }
 
-impl Canvas {
-    fn new() -> Self {
-        Self {
-            px: vec![[255; 3]; W * H],
-        }
+impl Table {
+    fn read(csv: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(csv).with_context(|| format!("reading {}", csv.display()))?;
+        let mut lines = text.lines();
+        let header = lines
+            .next()
+            .with_context(|| format!("{} is empty", csv.display()))?
+            .split(',')
+            .map(str::to_string)
+            .collect();
+        let rows = lines
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect();
+        Ok(Self { header, rows })
     }
-    fn set(&mut self, x: i64, y: i64, c: [u8; 3]) {
-        if x >= 0 && y >= 0 && (x as usize) < W && (y as usize) < H {
-            self.px[y as usize * W + x as usize] = c;
-        }
-    }
-    fn line(&mut self, (x0, y0): (i64, i64), (x1, y1): (i64, i64), c: [u8; 3], thick: bool) {
-        let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
-        let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
-        let (mut x, mut y, mut err) = (x0, y0, dx + dy);
-        loop {
-            self.set(x, y, c);
-            if thick {
-                self.set(x, y + 1, c);
-                self.set(x + 1, y, c);
-            }
-            if x == x1 && y == y1 {
-                break;
-            }
-            let e2 = 2 * err;
-            if e2 >= dy {
-                err += dy;
-                x += sx;
-            }
-            if e2 <= dx {
-                err += dx;
-                y += sy;
-            }
-        }
-    }
-}
 
-/// Reads `metrics.csv` and writes the plot to `png` (plus `png` with `.txt`: the legend).
-pub fn plot_losses(csv: &Path, png: &Path) -> Result<()> {
-    let text =
-        std::fs::read_to_string(csv).with_context(|| format!("reading {}", csv.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .context("empty metrics.csv")?
-        .split(',')
-        .collect();
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    if rows.is_empty() {
-        bail!("no epochs yet");
-    }
-    let col = |name: &str| header.iter().position(|h| *h == name);
-    let series_names = [
-        ("train_total", [31u8, 119, 180], true),
-        ("val_total", [255, 127, 14], true),
-        ("train_cd", [150, 150, 200], false),
-        ("train_normals", [150, 200, 150], false),
-        ("train_a", [200, 150, 150], false),
-        ("train_vstar", [200, 200, 120], false),
-        ("train_reg", [180, 140, 200], false),
-        ("train_occ", [120, 200, 200], false),
-    ];
-    let mut series = Vec::new();
-    for (name, colour, thick) in series_names {
-        let Some(c) = col(name) else { continue };
-        let pts: Vec<(f64, f64)> = rows
+    /// `(epoch, value)` of a column, skipping empty or unparsable cells.
+    fn series(&self, name: &str) -> Vec<(f64, f64)> {
+        let Some(c) = self.header.iter().position(|h| h == name) else {
+            return Vec::new();
+        };
+        self.rows
             .iter()
             .filter_map(|r| {
                 let e: f64 = r.first()?.parse().ok()?;
                 let v: f64 = r.get(c)?.parse().ok()?;
-                (v > 0.0 && v.is_finite()).then_some((e, v.log10()))
+                v.is_finite().then_some((e, v))
             })
-            .collect();
-        if !pts.is_empty() {
-            series.push((pts, colour, thick));
+            .collect()
+    }
+}
+
+/// The charts of a `metrics.csv`: the losses, and the meshed validation when present.
+pub fn loss_charts(csv: &Path) -> Result<Vec<Chart>> {
+    let t = Table::read(csv)?;
+    if t.rows.is_empty() {
+        bail!("no epochs yet in {}", csv.display());
+    }
+    let mut series = Vec::new();
+    for (split, dashed, what) in [("train", false, "train"), ("val", true, "val")] {
+        for (key, label, colour) in TERMS {
+            let pts = t.series(&format!("{split}_{key}"));
+            if pts.iter().any(|p| p.1 > 0.0) {
+                series.push(Series {
+                    label: format!("{label} ({what})"),
+                    colour,
+                    dashed,
+                    bold: key == "total",
+                    points: pts,
+                });
+            }
         }
     }
-    let all = series.iter().flat_map(|s| s.0.iter());
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in all {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
+    if series.is_empty() {
+        bail!("{} has no positive loss values", csv.display());
     }
-    if x0 > x1 {
-        bail!("nothing to plot");
+    let mut charts = vec![Chart {
+        title: "losses".into(),
+        x_label: "epoch".into(),
+        y_label: "loss (log scale)".into(),
+        log_y: true,
+        x_ticks: None,
+        series,
+    }];
+    let meshed: Vec<Series> = [
+        ("val_mesh_f1", "F1", [44, 160, 44]),
+        ("val_mesh_nc", "NC", [31, 119, 180]),
+    ]
+    .into_iter()
+    .map(|(col, label, colour)| Series::new(label, colour, t.series(col)))
+    .filter(|s| !s.points.is_empty())
+    .collect();
+    if !meshed.is_empty() {
+        charts.push(Chart {
+            title: "meshed validation".into(),
+            x_label: "epoch".into(),
+            y_label: "F1, NC".into(),
+            log_y: false,
+            x_ticks: None,
+            series: meshed,
+        });
     }
-    if x1 - x0 < 1.0 {
-        x1 = x0 + 1.0;
+    let cd = t.series("val_mesh_cd");
+    if !cd.is_empty() {
+        charts.push(Chart {
+            title: "meshed validation CD x1e5".into(),
+            x_label: "epoch".into(),
+            y_label: "CD x1e5 (log scale)".into(),
+            log_y: true,
+            x_ticks: None,
+            series: vec![Series::new("CD", [214, 39, 40], cd)],
+        });
     }
-    y0 = y0.floor();
-    y1 = y1.ceil().max(y0 + 1.0);
-    let mut cv = Canvas::new();
-    let px = |x: f64| MARGIN as i64 + ((x - x0) / (x1 - x0) * (W - 2 * MARGIN) as f64) as i64;
-    let py = |y: f64| (H - MARGIN) as i64 - ((y - y0) / (y1 - y0) * (H - 2 * MARGIN) as f64) as i64;
-    let grey = [220, 220, 220];
-    let mut d = y0;
-    while d <= y1 + 1e-9 {
-        cv.line((px(x0), py(d)), (px(x1), py(d)), grey, false);
-        d += 1.0;
-    }
-    let axis = [0, 0, 0];
-    cv.line((px(x0), py(y0)), (px(x1), py(y0)), axis, false);
-    cv.line((px(x0), py(y0)), (px(x0), py(y1)), axis, false);
-    for (pts, colour, thick) in series.iter().rev() {
-        for w in pts.windows(2) {
-            cv.line(
-                (px(w[0].0), py(w[0].1)),
-                (px(w[1].0), py(w[1].1)),
-                *colour,
-                *thick,
+    Ok(charts)
+}
+
+/// Reads `metrics.csv` and writes its loss curves to `png`.
+pub fn plot_losses(csv: &Path, png: &Path) -> Result<()> {
+    let charts = loss_charts(csv)?;
+    // The losses fill the top row; the meshed-validation panels share the row below.
+    let (losses, meshed) = charts.split_at(1);
+    chart::draw_rows(&[(losses, 560), (meshed, 320)], 1100, png)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_term_gets_a_train_and_a_validation_line() {
+        let dir = std::env::temp_dir().join(format!("ponq-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let header = "epoch,steps,seconds,lr,train_total,train_cd,train_normals,train_a,train_vstar,train_reg,train_occ,val_total,val_cd,val_normals,val_a,val_vstar,val_reg,val_occ,val_mesh_cd,val_mesh_f1,val_mesh_nc,val_mesh_valid";
+        let mut csv = format!("{header}\n");
+        for e in 1..=4 {
+            let v = |k: f64| format!("{:e}", k / e as f64);
+            let losses: Vec<String> = (1..=7).map(|k| v(f64::from(k))).collect();
+            let mesh = if e % 2 == 0 {
+                "5.0,0.8,0.9,true"
+            } else {
+                ",,,"
+            };
+            csv += &format!(
+                "{e},{},{},4e-4,{},{},{mesh}\n",
+                10 * e,
+                5 * e,
+                losses.join(","),
+                losses.join(",")
             );
         }
-        if pts.len() == 1 {
-            cv.line(
-                (px(pts[0].0), py(pts[0].1)),
-                (px(pts[0].0) + 2, py(pts[0].1)),
-                *colour,
-                true,
+        std::fs::write(dir.join("metrics.csv"), &csv).unwrap();
+        let charts = loss_charts(&dir.join("metrics.csv")).unwrap();
+        assert_eq!(charts.len(), 3, "losses, meshed F1/NC, meshed CD");
+        let labels: Vec<&str> = charts[0].series.iter().map(|s| s.label.as_str()).collect();
+        for (_, name, _) in TERMS {
+            assert!(
+                labels.contains(&format!("{name} (train)").as_str()),
+                "{labels:?}"
+            );
+            assert!(
+                labels.contains(&format!("{name} (val)").as_str()),
+                "{labels:?}"
             );
         }
+        assert!(charts[0].log_y);
+        assert!(charts[0].series.iter().all(|s| s.points.len() == 4));
+        assert!(
+            charts[0]
+                .series
+                .iter()
+                .all(|s| s.dashed == s.label.ends_with("(val)"))
+        );
+        assert_eq!(charts[1].series[0].points, vec![(2.0, 0.8), (4.0, 0.8)]);
+        plot_losses(&dir.join("metrics.csv"), &dir.join("losses.png")).unwrap();
+        assert!(std::fs::metadata(dir.join("losses.png")).unwrap().len() > 1000);
+        // A header only is an error, not a panic or an empty picture.
+        std::fs::write(dir.join("empty.csv"), format!("{header}\n")).unwrap();
+        assert!(plot_losses(&dir.join("empty.csv"), &dir.join("e.png")).is_err());
+        std::fs::remove_dir_all(&dir).ok();
     }
-    let file = std::fs::File::create(png).with_context(|| format!("creating {}", png.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), W as u32, H as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc.write_header()?;
-    let data: Vec<u8> = cv.px.iter().flatten().copied().collect();
-    w.write_image_data(&data)?;
-    let legend = format!(
-        "{}: x = epoch {x0}..{x1}, y = log10(loss) {y0}..{y1} (grid lines at powers of ten)\n\
-         blue: train_total (thick), orange: val_total (thick), thin: train_cd (blue-grey), \
-         train_normals (green), train_a (red), train_vstar (yellow), train_reg (purple), train_occ (cyan)\n",
-        png.display()
-    );
-    std::fs::write(png.with_extension("txt"), legend)?;
-    Ok(())
 }

@@ -236,7 +236,7 @@ struct RunArgs {
 
 fn run_split(a: RunArgs) -> Result<()> {
     use indicatif::{ProgressBar, ProgressStyle};
-    use ponq_train::eval::{self, EvalOptions, Method};
+    use ponq_eval::{self as eval, EvalOptions, Method};
     use rayon::prelude::*;
     if let Some(j) = a.jobs {
         rayon::ThreadPoolBuilder::new()
@@ -253,7 +253,7 @@ fn run_split(a: RunArgs) -> Result<()> {
     let device = ponq_model::backend::cpu();
     let (net, cfg) = match &a.model {
         Some(p) => ponq_model::weights::load(p, &device)?,
-        None => ponq_train::models::shipped(&device)?,
+        None => ponq_infer::shipped::load(&device)?,
     };
     let (shapes, missing) = eval::inputs(&a.data, a.split.as_deref())?;
     if shapes.is_empty() {

@@ -2,15 +2,15 @@
 //! repair, extraction) with the shipped model on the CPU (`flex`) backend, for SDF grids of
 //! the shipped example meshes at 33^3, 65^3 and 129^3 nodes.
 //!
-//! `cargo bench -p ponq-train --bench infer_bench` (optional arguments: resolutions, e.g.
+//! `cargo bench -p ponq-infer --bench infer_bench` (optional arguments: resolutions, e.g.
 //! `-- 32 64`; default 32 64 128).
 
 use std::time::Instant;
 
 use ponq_data::normalize::Normalization;
 use ponq_data::sdf::MeshSdf;
+use ponq_infer::{InferOptions, infer};
 use ponq_mesh::io::npy::Grid3;
-use ponq_train::infer::{InferOptions, infer};
 
 fn main() {
     let res: Vec<usize> = std::env::args()
@@ -23,7 +23,7 @@ fn main() {
         res
     };
     let dev = ponq_model::backend::cpu();
-    let (net, cfg) = ponq_train::models::shipped(&dev).expect("shipped model");
+    let (net, cfg) = ponq_infer::shipped::load(&dev).expect("shipped model");
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     println!(
         "threads: {}; model width {}, {} encoder layers, P = {}",

@@ -8,11 +8,10 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
+use ponq_infer::{InferOptions, infer, shipped};
 use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::{io, validity};
 use ponq_model::backend::{BackendKind, device};
-use ponq_train::infer::{InferOptions, infer};
-use ponq_train::models;
 
 /// Reconstruct a mesh from a signed distance grid (negative inside) with the PoNQ network:
 /// SDF grid -> network -> PoNQ -> Delaunay -> tags -> min cut -> mesh.
@@ -126,7 +125,7 @@ fn run(args: &Args) -> Result<Outcome> {
             (n, c, false)
         }
         (None, None) => {
-            let (n, c) = models::shipped(&dev)?;
+            let (n, c) = shipped::load(&dev)?;
             (n, c, false)
         }
     };

@@ -33,7 +33,7 @@ pub fn candidates() -> Vec<PathBuf> {
 
 /// Loads the shipped model: `$PONQ_MODEL` if set (an error if it cannot be read), else the
 /// source tree's `models/ponq-cpu.bpk` if present, else the built-in copy.
-pub fn shipped(device: &Device) -> Result<(PonqNet, PonqNetConfig)> {
+pub fn load(device: &Device) -> Result<(PonqNet, PonqNetConfig)> {
     if let Some(p) = std::env::var_os("PONQ_MODEL") {
         let p = PathBuf::from(p);
         return ponq_model::weights::load(&p, device)

@@ -1,12 +1,11 @@
-//! `ponq-infer` end to end (shipped model), tiling exactness, bad inputs; `ponq-eval run`
-//! on a tiny split against direct metric calls.
+//! `ponq-infer` end to end (shipped model), tiling exactness, bad inputs, the built-in model.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use ponq_infer::{Frame, predict_tiled};
 use ponq_mesh::io::npy::{Grid3, write_npy_grid_f32};
 use ponq_model::{PonqNetConfig, backend};
-use ponq_train::infer::{Frame, predict_tiled};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("ponq-infer-{name}-{}", std::process::id()));
@@ -217,115 +216,11 @@ fn infer_rejects_bad_input_with_clear_errors() {
 }
 
 #[test]
-fn eval_run_matches_direct_metric_calls() {
-    let d = tmp("eval");
-    let data = d.join("data");
-    // Shapes in sub-folders are found too.
-    std::fs::create_dir_all(data.join("cad")).unwrap();
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    std::fs::copy(root.join("examples/csg.obj"), data.join("cad/csg.obj")).unwrap();
-    std::fs::write(d.join("split.txt"), "csg\nnot_here\n").unwrap();
-    // A tiny network keeps the test fast; the numbers checked are MC's and the summary's.
-    let dev = backend::cpu();
-    let cfg = PonqNetConfig::new()
-        .with_width(8)
-        .with_points_per_cell(2)
-        .with_encoder_layers(1)
-        .with_decoder_blocks(1);
-    ponq_model::weights::save(&cfg.init(&dev), &cfg, &d.join("net.bpk")).unwrap();
-    let report = d.join("report");
-    let run = || {
-        Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
-            .args([
-                "run",
-                "--res",
-                "8",
-                "--samples",
-                "3000",
-                "--renders",
-                "1",
-                "--jobs",
-                "1",
-                "-q",
-                "--data",
-            ])
-            .arg(&data)
-            .arg("--split")
-            .arg(d.join("split.txt"))
-            .arg("--model")
-            .arg(d.join("net.bpk"))
-            .arg("-o")
-            .arg(&report)
-            .output()
-            .unwrap()
-    };
-    let o = run();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(report.join("per_shape.csv")).unwrap();
-    let rows: Vec<ponq_train::eval::Row> = csv
-        .lines()
-        .skip(1)
-        .map(|l| ponq_train::eval::Row::parse(l).unwrap())
-        .collect();
-    assert_eq!(rows.len(), 2, "PoNQ and MC for one shape");
-    let mc = rows.iter().find(|r| r.method == "MC").unwrap();
-    // Direct calls: normalise, SDF grid, marching cubes, metrics with the same samples.
-    let gt = ponq_mesh::io::read_mesh(data.join("cad/csg.obj")).unwrap();
-    let gt = ponq_data::normalize::Normalization::of(&gt)
-        .unwrap()
-        .apply_mesh(&gt);
-    let g = ponq_data::sdf::MeshSdf::new(&gt)
-        .unwrap()
-        .grid(8, |_| {})
-        .unwrap();
-    let v: Vec<f64> = g.values.iter().map(|&x| f64::from(x)).collect();
-    let m = ponq_mesh::marching_cubes::marching_cubes(&v, [9; 3], [-1.0; 3], [1.0; 3]).unwrap();
-    let opts = ponq_mesh::metrics::MetricOptions {
-        surface_samples: 3000,
-        edge_samples: 3000,
-        check_validity: false,
-        ..Default::default()
-    };
-    let want = ponq_mesh::metrics::compare(&m, &gt, &opts);
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
-    assert!(
-        close(mc.cd, want.cd_x1e5) && close(mc.f1, want.f1) && close(mc.nc, want.nc),
-        "{mc:?} vs {want:?}"
-    );
-    assert!(
-        close(mc.ecd, want.ecd_x1e2) && close(mc.ef1, want.ef1),
-        "{mc:?} vs {want:?}"
-    );
-    assert_eq!((mc.vertices, mc.faces), (m.vertices.len(), m.faces.len()));
-    assert_eq!(mc.watertight, ponq_mesh::validity::check(&m).is_valid());
-    let ponq = rows.iter().find(|r| r.method == "PoNQ").unwrap();
-    assert!(ponq.faces == 0 || ponq.watertight, "{ponq:?}");
-    // The summary's MC line shows the same numbers (one shape: mean = value).
-    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
-    let line = summary.lines().find(|l| l.starts_with("| MC |")).unwrap();
-    assert!(
-        line.contains(&format!("| {:.3} | {:.3} | {:.3} |", mc.cd, mc.f1, mc.nc)),
-        "{line}"
-    );
-    let rep = std::fs::read_to_string(report.join("report.md")).unwrap();
-    assert!(rep.contains("not_here"), "missing ids are listed");
-    assert!(report.join("renders/csg_9.png").is_file());
-    // Resumable: a second run reuses the rows (same file content).
-    let o = run();
-    assert!(o.status.success());
-    assert_eq!(
-        std::fs::read_to_string(report.join("per_shape.csv")).unwrap(),
-        csv
-    );
-    std::fs::remove_dir_all(&d).ok();
-}
-
-#[test]
 fn built_in_model_equals_the_shipped_file() {
     let dev = backend::cpu();
     let here = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/ponq-cpu.bpk");
     let (file_net, file_cfg) = ponq_model::weights::load(&here, &dev).unwrap();
-    let (emb_net, emb_cfg) = ponq_train::models::embedded(&dev).unwrap();
+    let (emb_net, emb_cfg) = ponq_infer::shipped::embedded(&dev).unwrap();
     assert_eq!(file_cfg.width, emb_cfg.width);
     assert_eq!(file_cfg.encoder_layers, emb_cfg.encoder_layers);
     let g = box_grid(6, [0.5, 0.4, 0.3], 0.1);
@@ -355,25 +250,4 @@ fn built_in_model_equals_the_shipped_file() {
     .unwrap();
     assert_eq!(a.points, b.points);
     assert_eq!(a.occupancy, b.occupancy);
-}
-
-#[test]
-fn eval_inputs_are_found_recursively_and_ids_must_be_unique() {
-    let d = tmp("inputs");
-    std::fs::create_dir_all(d.join("a/b")).unwrap();
-    std::fs::create_dir_all(d.join("c")).unwrap();
-    for f in ["a/one.obj", "a/b/two.ply", "c/three.npz", "c/notes.txt"] {
-        std::fs::write(d.join(f), "").unwrap();
-    }
-    std::fs::write(d.join("split.txt"), "one\nthree\nfour\n").unwrap();
-    let (files, missing) = ponq_train::eval::inputs(&d, Some(&d.join("split.txt"))).unwrap();
-    let ids: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
-    assert_eq!(ids, ["one", "three"]);
-    assert_eq!(missing, ["four"]);
-    let (all, _) = ponq_train::eval::inputs(&d, None).unwrap();
-    assert_eq!(all.len(), 3);
-    std::fs::write(d.join("c/one.stl"), "").unwrap();
-    let err = ponq_train::eval::inputs(&d, None).unwrap_err().to_string();
-    assert!(err.contains("two shapes with the id \"one\""), "{err}");
-    std::fs::remove_dir_all(&d).ok();
 }

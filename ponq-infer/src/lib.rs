@@ -1,0 +1,32 @@
+//! # ponq-infer
+//!
+//! Inference with a trained PoNQ network: an SDF grid goes in, a watertight, manifold,
+//! self-intersection-free mesh comes out. The pipeline, by module:
+//!
+//! - [`frame`]: the user's grid and bounds -> the network's normalised frame (and back);
+//! - [`tiles`]: the network (`ponq_model::PonqNet`) over the grid in overlapping tiles whose
+//!   margins make the result equal to one pass over the whole grid;
+//! - [`reconstruct`]: prediction -> PoNQ (kept cells, PoNQ-lite / hierarchy) -> `ponq_mesh`
+//!   (Delaunay -> tags -> min cut -> mesh);
+//! - [`shipped`]: the model in the repository's `models/` folder, also built into the program.
+//!
+//! The `ponq-infer` program is a thin command line over [`infer`].
+//!
+//! ```no_run
+//! use ponq_infer::{InferOptions, infer, shipped};
+//! let device = ponq_model::backend::cpu();
+//! let (net, cfg) = shipped::load(&device).unwrap();
+//! let grid = ponq_mesh::io::npy::read_npy_grid("examples/csg_sdf_33.npy").unwrap();
+//! let out = infer(&net, cfg.encoder_layers, &grid, &InferOptions::default(), &device, |_, _| {})
+//!     .unwrap();
+//! println!("{} faces", out.mesh.faces.len());
+//! ```
+
+pub mod frame;
+pub mod reconstruct;
+pub mod shipped;
+pub mod tiles;
+
+pub use frame::Frame;
+pub use reconstruct::{InferOptions, InferTimes, Inference, infer};
+pub use tiles::predict_tiled;

@@ -1,0 +1,183 @@
+//! Reconstruction: SDF grid -> network (in [`tiles`](crate::tiles)) -> prediction -> PoNQ
+//! (kept cells, optional PoNQ-lite / hierarchy) -> `ponq_mesh::mesher` -> mesh, in the user's
+//! frame (see [`frame`](crate::frame)).
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+use ponq_mesh::io::npy::Grid3;
+use ponq_mesh::mesher::{MeshingOptions, MeshingStats, mesh_ponq};
+use ponq_mesh::{Ponq, TriMesh};
+use ponq_model::{PonqNet, network_input_scale};
+
+use crate::frame::{Frame, ponq_to_user};
+use crate::tiles::predict_tiled;
+
+/// Options of [`infer`].
+#[derive(Debug, Clone)]
+pub struct InferOptions {
+    /// The box spanned by the grid nodes (default `[-1,1]^3`).
+    pub bounds: ([f64; 3], [f64; 3]),
+    /// Cells per side of a tile's kept core (a tile adds the encoder's margin on each side).
+    pub tile: usize,
+    /// PoNQ-lite: one point per cell.
+    pub lite: bool,
+    /// Hierarchy: merge 2x2x2 blocks this many more times (implies lite).
+    pub coarsen: u32,
+    /// Open-surface culling threshold.
+    pub open: Option<f64>,
+    /// Cells are kept when their occupancy exceeds this (0.5).
+    pub occupancy_threshold: f32,
+    /// Use the authors' cell bases (only for their pretrained weights).
+    pub authors_cell_base: bool,
+}
+
+impl Default for InferOptions {
+    fn default() -> Self {
+        Self {
+            bounds: ([-1.0; 3], [1.0; 3]),
+            tile: 48,
+            lite: false,
+            coarsen: 0,
+            open: None,
+            occupancy_threshold: 0.5,
+            authors_cell_base: false,
+        }
+    }
+}
+
+/// Time per stage.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct InferTimes {
+    /// Network (all tiles).
+    pub network: Duration,
+    /// Prediction to PoNQ (and lite / coarsening).
+    pub convert: Duration,
+    /// Meshing (the stages are in [`Inference::meshing`]).
+    pub meshing: Duration,
+}
+
+/// What [`infer`] produced.
+#[derive(Debug, Clone)]
+pub struct Inference {
+    /// The mesh in the user's coordinates (empty when no cell was kept; see `message`).
+    pub mesh: TriMesh,
+    /// The PoNQ that was meshed, in the user's coordinates.
+    pub ponq: Ponq,
+    /// Meshing statistics.
+    pub meshing: MeshingStats,
+    /// Time per stage.
+    pub times: InferTimes,
+    /// Tiles the network ran on.
+    pub tiles: usize,
+    /// Cells kept (occupied and close).
+    pub kept_cells: usize,
+    /// A note when the result is empty or degenerate.
+    pub message: Option<String>,
+}
+
+/// Reconstructs a mesh from an SDF grid (negative inside) with a trained network.
+pub fn infer(
+    net: &PonqNet,
+    encoder_layers: usize,
+    grid: &Grid3,
+    opts: &InferOptions,
+    device: &Device,
+    progress: impl FnMut(usize, usize),
+) -> Result<Inference> {
+    let frame = Frame::of(grid, opts.bounds)?;
+    let (min, max) = grid
+        .data
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    if !(min < 0.0 && max > 0.0) {
+        bail!(
+            "the SDF has no sign change (values in [{min}, {max}]): the surface is empty; nothing to mesh"
+        );
+    }
+    let s = frame.scale();
+    let normalised: Vec<f64> = grid.data.iter().map(|v| v * s).collect();
+    let k = network_input_scale(frame.n);
+    let input: Vec<f32> = normalised.iter().map(|&v| v as f32 * k).collect();
+    let t0 = Instant::now();
+    let (pred, tiles) = predict_tiled(
+        net,
+        &input,
+        &frame,
+        encoder_layers,
+        opts.tile,
+        opts.authors_cell_base,
+        device,
+        progress,
+    )?;
+    let network = t0.elapsed();
+    // Close mask over the cells.
+    let t1 = Instant::now();
+    let [c0, c1, c2] = frame.cells;
+    let thr = 2.0 * 3f64.sqrt() / (frame.n as f64 + 1.0);
+    let node = |i: usize, j: usize, k: usize| normalised[(i * (c1 + 1) + j) * (c2 + 1) + k];
+    let mut close = Vec::with_capacity(c0 * c1 * c2);
+    for i in 0..c0 {
+        for j in 0..c1 {
+            for k in 0..c2 {
+                close.push(
+                    (0..8).all(|d| node(i + (d >> 2), j + ((d >> 1) & 1), k + (d & 1)).abs() < thr),
+                );
+            }
+        }
+    }
+    let kept = pred.kept_cells(opts.occupancy_threshold, Some(&close))?;
+    let (mut ponq, cells) = pred.to_ponq(&kept)?;
+    let mut grid_scale = frame.n as f64;
+    if opts.lite || opts.coarsen > 0 {
+        ponq = ponq_mesh::lite::coarsen(&ponq, &cells, opts.coarsen)?;
+        grid_scale /= f64::from(1u32 << opts.coarsen.min(20));
+    }
+    let convert = t1.elapsed();
+    let t2 = Instant::now();
+    let mopts = MeshingOptions {
+        grid_scale,
+        domain: (
+            [-1.0; 3],
+            frame.cells.map(|c| -1.0 + c as f64 * 2.0 / frame.n as f64),
+        ),
+        open_threshold: opts.open,
+        ..Default::default()
+    };
+    let (mesh, meshing, message) = if ponq.is_empty() {
+        (
+            TriMesh::default(),
+            MeshingStats::default(),
+            Some(
+                "the network kept no cell (no occupied cell near the surface): empty mesh"
+                    .to_string(),
+            ),
+        )
+    } else {
+        let out = mesh_ponq(&ponq, &mopts).context("meshing the predicted PoNQ")?;
+        (out.mesh, out.stats, out.message)
+    };
+    let meshing_time = t2.elapsed();
+    let mesh = if frame.is_identity() {
+        mesh
+    } else {
+        TriMesh {
+            vertices: mesh.vertices.iter().map(|&v| frame.to_user(v)).collect(),
+            faces: mesh.faces,
+        }
+    };
+    Ok(Inference {
+        mesh,
+        ponq: ponq_to_user(&ponq, &frame)?,
+        meshing,
+        times: InferTimes {
+            network,
+            convert,
+            meshing: meshing_time,
+        },
+        tiles,
+        kept_cells: kept.len(),
+        message,
+    })
+}

@@ -1,0 +1,69 @@
+//! The network over a grid of any size, in tiles whose margins (the encoder's reach) make the
+//! result identical to one pass over the whole grid, so peak memory is bounded by the tile.
+
+use anyhow::Result;
+use burn::prelude::*;
+use ponq_model::{GridFrame, PonqNet, Prediction};
+
+use crate::frame::Frame;
+
+/// Runs the network over `grid` (normalised values, already scaled for the network) in
+/// tiles; returns the prediction over all cells and the number of tiles.
+// Grid, network, tiling and device are independent inputs; a struct would only rename them.
+#[allow(clippy::too_many_arguments)]
+pub fn predict_tiled(
+    net: &PonqNet,
+    input: &[f32],
+    frame: &Frame,
+    margin: usize,
+    tile: usize,
+    authors_cell_base: bool,
+    device: &Device,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<(Prediction, usize)> {
+    let cells = frame.cells;
+    let nodes = cells.map(|c| c + 1);
+    let tile = tile.max(1);
+    let mut pred = Prediction::zeros(cells, net.points_per_cell());
+    let starts = |n: usize| -> Vec<(usize, usize)> {
+        (0..n)
+            .step_by(tile)
+            .map(|a| (a, (a + tile).min(n)))
+            .collect()
+    };
+    let (sx, sy, sz) = (starts(cells[0]), starts(cells[1]), starts(cells[2]));
+    let total = sx.len() * sy.len() * sz.len();
+    let mut done = 0;
+    for &(ax, bx) in &sx {
+        for &(ay, by) in &sy {
+            for &(az, bz) in &sz {
+                let core = [(ax, bx), (ay, by), (az, bz)];
+                let lo: [usize; 3] = std::array::from_fn(|a| core[a].0.saturating_sub(margin));
+                let hi: [usize; 3] = std::array::from_fn(|a| (core[a].1 + margin).min(cells[a]));
+                let m: [usize; 3] = std::array::from_fn(|a| hi[a] - lo[a] + 1);
+                let mut data = Vec::with_capacity(m[0] * m[1] * m[2]);
+                for i in lo[0]..=hi[0] {
+                    for j in lo[1]..=hi[1] {
+                        let row = (i * nodes[1] + j) * nodes[2];
+                        data.extend_from_slice(&input[row + lo[2]..=row + hi[2]]);
+                    }
+                }
+                let x = Tensor::<1>::from_data(TensorData::new(data, [m[0] * m[1] * m[2]]), device)
+                    .reshape([1, 1, m[0], m[1], m[2]]);
+                let mut gf = GridFrame::crop(frame.n, lo);
+                gf.authors_cell_base = authors_cell_base;
+                let out = net.forward(x, &gf);
+                let t = Prediction::from_output(&out, 0)?;
+                pred.paste(
+                    &t,
+                    std::array::from_fn(|a| core[a].0 - lo[a]),
+                    std::array::from_fn(|a| core[a].1 - lo[a]),
+                    lo,
+                )?;
+                done += 1;
+                progress(done, total);
+            }
+        }
+    }
+    Ok((pred, total))
+}

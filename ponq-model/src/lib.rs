@@ -4,7 +4,8 @@
 //! (`A = U U^T` and v*) and an occupancy come out ([`model`]); [`prediction`] turns that into
 //! the [`ponq_mesh::Ponq`] that `ponq-mesh` meshes; [`weights`] saves / loads our burnpack
 //! files and the authors' PyTorch state dict; [`backend`] picks the device (`flex` CPU by
-//! default, `wgpu` with the cargo feature of that name).
+//! default, `wgpu` with the cargo feature of that name); [`fast`] holds the fast CPU kernels
+//! the network runs on by default on the CPU (custom Burn operations with their own backward).
 //!
 //! ```no_run
 //! use burn::prelude::*;
@@ -22,11 +23,13 @@
 
 pub mod backend;
 pub mod error;
+pub mod fast;
 pub mod model;
 pub mod prediction;
 pub mod weights;
 
 pub use error::{ModelError, Result};
+pub use fast::Kernels;
 pub use model::{GridFrame, PonqNet, PonqNetConfig, PonqOutput};
 pub use prediction::Prediction;
 

@@ -9,6 +9,8 @@ use burn::nn::conv::{Conv3d, Conv3dConfig};
 use burn::prelude::*;
 use burn::tensor::activation::{leaky_relu, sigmoid};
 
+use crate::fast::{self, Kernels};
+
 /// Slope of every LeakyReLU of the network.
 pub const LEAKY_SLOPE: f64 = 0.01;
 
@@ -50,6 +52,13 @@ impl ResBlock {
         let y = leaky_relu(self.conv_1.forward(x.clone()), LEAKY_SLOPE);
         leaky_relu(self.conv_2.forward(y) + x, LEAKY_SLOPE)
     }
+
+    /// The same block on channels-last rows `[rows, W]` with the fast kernels.
+    fn forward_fast(&self, x: Tensor<2>) -> Tensor<2> {
+        let s = Some(LEAKY_SLOPE as f32);
+        let y = fast::ops::linear(x.clone(), &self.conv_1, None, s);
+        fast::ops::linear(y, &self.conv_2, Some(x), s)
+    }
 }
 
 /// One decoder: residual blocks then a 1x1x1 head with `outputs` channels.
@@ -79,6 +88,19 @@ impl Decoder {
         y.reshape([batch, channels, d1 * d2 * d3])
             .swap_dims(1, 2)
             .reshape([batch, d1 * d2 * d3, channels / dim, dim])
+    }
+
+    /// The same decoder on channels-last rows `[B * cells, W]` with the fast kernels; the
+    /// rows of a batch item are its cells in C order, so the head's `[rows, outputs]` is
+    /// already `[B, cells, outputs / dim, dim]`.
+    fn forward_fast(&self, features: Tensor<2>, batch: usize, dim: usize) -> Tensor<4> {
+        let mut x = features;
+        for b in &self.blocks {
+            x = b.forward_fast(x);
+        }
+        let y = fast::ops::linear(x, &self.head, None, None);
+        let [rows, channels] = y.dims();
+        y.reshape([batch, rows / batch, channels / dim, dim])
     }
 }
 
@@ -180,6 +202,8 @@ pub struct PonqNet {
     decoder_occupancy: Decoder,
     #[module(skip)]
     points_per_cell: usize,
+    #[module(skip)]
+    kernels: Kernels,
 }
 
 impl PonqNetConfig {
@@ -203,6 +227,7 @@ impl PonqNetConfig {
             decoder_vstars: dec(3 * p),
             decoder_occupancy: dec(1),
             points_per_cell: p,
+            kernels: Kernels::default(),
         }
     }
 }
@@ -213,8 +238,27 @@ impl PonqNet {
         self.points_per_cell
     }
 
+    /// The layer implementation this network runs on the CPU (default [`Kernels::Fast`]).
+    pub fn kernels(&self) -> Kernels {
+        self.kernels
+    }
+
+    /// Selects the layer implementation on the CPU; the weights are the same for both.
+    pub fn with_kernels(mut self, kernels: Kernels) -> Self {
+        self.kernels = kernels;
+        self
+    }
+
+    /// Whether a forward on `device` takes the fast CPU kernels.
+    pub fn uses_fast_kernels(&self, device: &Device) -> bool {
+        self.kernels == Kernels::Fast && fast::supports(device)
+    }
+
     /// Encoder features `[B, W, n1, n2, n3]` of input grids `[B, 1, n1+1, n2+1, n3+1]`.
     pub fn encode(&self, sdf: Tensor<5>) -> Tensor<5> {
+        if self.uses_fast_kernels(&sdf.device()) {
+            return self.encode_fast(sdf).permute([0, 4, 1, 2, 3]);
+        }
         let mut x = leaky_relu(self.input.forward(sdf), LEAKY_SLOPE);
         for c in &self.encoder {
             x = leaky_relu(c.forward(x), LEAKY_SLOPE);
@@ -222,12 +266,60 @@ impl PonqNet {
         x
     }
 
+    /// Channels-last encoder features `[B, n1, n2, n3, W]` with the fast kernels (the input
+    /// has one channel, so `[B, 1, D1, D2, D3]` is already channels-last).
+    fn encode_fast(&self, sdf: Tensor<5>) -> Tensor<5> {
+        let [b, c, d1, d2, d3] = sdf.dims();
+        debug_assert_eq!(c, 1);
+        let s = Some(LEAKY_SLOPE as f32);
+        // The input convolution is unpadded, the encoder's keep the size (see `init`).
+        let mut x = fast::ops::conv3d(sdf.reshape([b, d1, d2, d3, c]), &self.input, 0, s);
+        for conv in &self.encoder {
+            x = fast::ops::conv3d(x, conv, 1, s);
+        }
+        x
+    }
+
+    /// The five decoders' outputs `(points, vstar offsets, normals, cholesky, occupancy
+    /// logits)` as `[B, cells, P or 1, dim]`, and the cells per axis.
+    fn decode(&self, sdf: Tensor<5>) -> ([Tensor<4>; 5], [usize; 3]) {
+        if self.uses_fast_kernels(&sdf.device()) {
+            let f = self.encode_fast(sdf);
+            let [batch, n1, n2, n3, w] = f.dims();
+            let rows = f.reshape([batch * n1 * n2 * n3, w]);
+            let d = |dec: &Decoder, dim| dec.forward_fast(rows.clone(), batch, dim);
+            return (
+                [
+                    d(&self.decoder_points, 3),
+                    d(&self.decoder_vstars, 3),
+                    d(&self.decoder_normals, 3),
+                    d(&self.decoder_cholesky, 6),
+                    d(&self.decoder_occupancy, 1),
+                ],
+                [n1, n2, n3],
+            );
+        }
+        let f = self.encode(sdf);
+        let [_, _, n1, n2, n3] = f.dims();
+        let d = |dec: &Decoder, dim| dec.forward(f.clone(), dim);
+        (
+            [
+                d(&self.decoder_points, 3),
+                d(&self.decoder_vstars, 3),
+                d(&self.decoder_normals, 3),
+                d(&self.decoder_cholesky, 6),
+                d(&self.decoder_occupancy, 1),
+            ],
+            [n1, n2, n3],
+        )
+    }
+
     /// Runs the network on `[B, 1, n1+1, n2+1, n3+1]` SDF grids (already scaled, see
     /// [`crate::network_input_scale`]) whose node `(0,0,0)` and spacing are given by `frame`.
     pub fn forward(&self, sdf: Tensor<5>, frame: &GridFrame) -> PonqOutput {
         let device = sdf.device();
-        let features = self.encode(sdf);
-        let [batch, _, n1, n2, n3] = features.dims();
+        let batch = sdf.dims()[0];
+        let ([points, vstars, normals, cholesky, occupancy], [n1, n2, n3]) = self.decode(sdf);
         let cells = n1 * n2 * n3;
         let scale = frame.offset_scale as f32;
         let bases = Tensor::<1>::from_data(
@@ -235,20 +327,9 @@ impl PonqNet {
             &device,
         )
         .reshape([1, cells, 1, 3]);
-        let points = self
-            .decoder_points
-            .forward(features.clone(), 3)
-            .mul_scalar(scale)
-            + bases;
-        let vstars = self
-            .decoder_vstars
-            .forward(features.clone(), 3)
-            .mul_scalar(scale)
-            + points.clone().detach();
-        let normals = self.decoder_normals.forward(features.clone(), 3);
-        let cholesky = self.decoder_cholesky.forward(features.clone(), 6);
-        let occupancy =
-            sigmoid(self.decoder_occupancy.forward(features, 1)).reshape([batch, cells]);
+        let points = points.mul_scalar(scale) + bases;
+        let vstars = vstars.mul_scalar(scale) + points.clone().detach();
+        let occupancy = sigmoid(occupancy).reshape([batch, cells]);
         PonqOutput {
             points,
             vstars,

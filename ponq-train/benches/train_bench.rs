@@ -1,18 +1,72 @@
-//! Forward and training-step times of the paper's network on a 33^3 grid and of the CPU
-//! variant (`configs/cpu.toml`) on its 17^3-node crops, on the CPU (`flex`) backend.
+//! The network on the CPU, side by side in one process: Burn's stock layers against the fast
+//! CPU kernels (`ponq_model::fast`), forward and training step, with their GFLOP/s, peak
+//! memory, and the machine's GEMM rate (one large `gemm` call) as the ceiling.
 //!
-//! `cargo bench -p ponq-train --bench train_bench` (optional argument: repetitions, default 3).
-//! Reference (SPEC 9): PyTorch on these two cores, forward 2.85 s, step ~9.5 s per 33^3 grid.
+//! `cargo bench -p ponq-train --bench train_bench [REPS]` (default 3 repetitions, medians; the
+//! stock and fast runs alternate so that the machine's drift hits both alike).
+//! `ponq-train/benches/side_by_side.sh` also runs the same network in PyTorch.
+//!
+//! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipe's
+//! network (`configs/cpu.toml`, width 32) on 17^3-node crops, batch 1 and 8.
 
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use burn::optim::GradientsParams;
 use burn::prelude::*;
-use ponq_model::PonqNet;
+use ponq_model::{Kernels, PonqNet};
 use ponq_train::config::{LossWeights, ModelSection, TrainConfig};
 use ponq_train::data::{Batcher, Item, ItemOptions, item_frame, make_item, sphere_shape};
 use ponq_train::{loss, train};
 use rand::SeedableRng;
+
+/// The system allocator, counting live bytes and their peak.
+struct Counting;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to `System`; the counters do not affect allocation.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(l) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(l.size(), Ordering::Relaxed) + l.size();
+            PEAK.fetch_max(now, Ordering::Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) };
+        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        let q = unsafe { System.realloc(p, l, new) };
+        if !q.is_null() {
+            if new > l.size() {
+                let now = LIVE.fetch_add(new - l.size(), Ordering::Relaxed) + new - l.size();
+                PEAK.fetch_max(now, Ordering::Relaxed);
+            } else {
+                LIVE.fetch_sub(l.size() - new, Ordering::Relaxed);
+            }
+        }
+        q
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// Runs `f`, returning its result, seconds and the peak of live heap bytes above the start.
+fn measure<T>(f: impl FnOnce() -> T) -> (T, f64, usize) {
+    let base = LIVE.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    let t = Instant::now();
+    let r = f();
+    let s = t.elapsed().as_secs_f64();
+    (r, s, PEAK.load(Ordering::Relaxed).saturating_sub(base))
+}
 
 fn items(batch: usize, crop: usize, samples: usize) -> Vec<Item> {
     let shape = sphere_shape("bench", 32, [0.05, -0.03, 0.02], 0.6, 200_000);
@@ -37,56 +91,147 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// Multiply-adds x 2 of one forward over `cells` output cells.
+fn forward_flops(m: &ModelSection, cells: usize) -> f64 {
+    let w = m.width as f64;
+    let p = m.points_per_cell as f64;
+    let enc = 8.0 * w + m.encoder_layers as f64 * 27.0 * w * w;
+    let heads = (3.0 + 3.0 + 6.0 + 3.0) * p + 1.0;
+    let dec = 5.0 * m.decoder_blocks as f64 * 2.0 * w * w + w * heads;
+    2.0 * cells as f64 * (enc + dec)
+}
+
+/// GFLOP/s of one large `gemm` call on all threads (the shape of the paper's k3 convolution as
+/// an im2col GEMM: 32,768 x 3,456 x 128), best of 3.
+fn gemm_ceiling() -> f64 {
+    let (m, k, n) = (32768usize, 3456usize, 128usize);
+    let a: Vec<f32> = (0..m * k).map(|i| (i % 17) as f32 * 0.01).collect();
+    let b: Vec<f32> = (0..k * n).map(|i| (i % 13) as f32 * 0.01).collect();
+    let mut c = vec![0.0f32; m * n];
+    let mut best = f64::MAX;
+    for _ in 0..3 {
+        let t = Instant::now();
+        // SAFETY: row-major a [m, k], b [k, n], c [m, n], all of those sizes.
+        unsafe {
+            gemm::gemm(
+                m,
+                n,
+                k,
+                c.as_mut_ptr(),
+                1,
+                n as isize,
+                false,
+                a.as_ptr(),
+                1,
+                k as isize,
+                b.as_ptr(),
+                1,
+                n as isize,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                gemm::Parallelism::Rayon(0),
+            )
+        };
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    2.0 * (m * k * n) as f64 / best / 1e9
+}
+
+struct Row {
+    fwd: Vec<f64>,
+    step: Vec<f64>,
+    fwd_mem: usize,
+    step_mem: usize,
+}
+
 fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: usize, reps: usize) {
     let cfg = TrainConfig {
-        model,
+        model: model.clone(),
         ..Default::default()
     };
     let dev = ponq_model::backend::cpu();
     let its = items(batch, crop, samples);
     let frame = item_frame(32);
-    // Forward without autodiff.
+    let cells = batch
+        * if crop == 0 {
+            32 * 32 * 32
+        } else {
+            crop * crop * crop
+        };
+    let flops = forward_flops(&model, cells);
     let net: PonqNet = cfg.model.net().init(&dev);
     let x = Batcher {
         device: dev.clone(),
     }
     .batch(&its)
     .expect("batch");
-    let mut fwd = Vec::new();
-    for _ in 0..reps + 1 {
-        let t = Instant::now();
-        let out = net.forward(x.clone(), &frame);
-        let _ = out.occupancy.into_data();
-        fwd.push(t.elapsed().as_secs_f64());
-    }
-    fwd.remove(0);
-    // Training step: forward, losses (kd-tree assignment), backward, clipping, AdamW.
     let ad = dev.autodiff();
-    let mut model: PonqNet = cfg.model.net().init(&ad);
-    let mut optim = burn::optim::AdamWConfig::new().with_amsgrad(true).init();
     let xa = Batcher { device: ad.clone() }.batch(&its).expect("batch");
-    let mut step = Vec::new();
-    for _ in 0..reps + 1 {
-        let t = Instant::now();
-        let out = model.forward(xa.clone(), &frame);
-        let l = loss::compute(&out, &its, &LossWeights::default()).expect("loss");
-        let mut g = GradientsParams::from_grads(l.total.backward(), &model);
-        train::clip_global_norm(&model, &mut g, 1.0);
-        model = optim.step(1e-4, model, g);
-        step.push(t.elapsed().as_secs_f64());
+    let kinds = [Kernels::Stock, Kernels::Fast];
+    let mut rows: Vec<Row> = kinds
+        .iter()
+        .map(|_| Row {
+            fwd: vec![],
+            step: vec![],
+            fwd_mem: 0,
+            step_mem: 0,
+        })
+        .collect();
+    // One model and optimizer per path, the same initial weights.
+    let init: PonqNet = cfg.model.net().init(&ad);
+    let mut models: Vec<PonqNet> = kinds
+        .iter()
+        .map(|&k| init.clone().with_kernels(k))
+        .collect();
+    let mut optims: Vec<_> = kinds
+        .iter()
+        .map(|_| burn::optim::AdamWConfig::new().with_amsgrad(true).init())
+        .collect();
+    for rep in 0..=reps {
+        for (i, &k) in kinds.iter().enumerate() {
+            let n = net.clone().with_kernels(k);
+            let (_, s, mem) = measure(|| {
+                let out = n.forward(x.clone(), &frame);
+                let _ = out.occupancy.into_data();
+            });
+            let model = models[i].clone();
+            let ((), st, smem) = measure(|| {
+                let out = model.forward(xa.clone(), &frame);
+                let l = loss::compute(&out, &its, &LossWeights::default()).expect("loss");
+                let mut g = GradientsParams::from_grads(l.total.backward(), &model);
+                train::clip_global_norm(&model, &mut g, 1.0);
+                models[i] = optims[i].step(1e-4, model.clone(), g);
+            });
+            if rep > 0 {
+                rows[i].fwd.push(s);
+                rows[i].step.push(st);
+            }
+            rows[i].fwd_mem = rows[i].fwd_mem.max(mem);
+            rows[i].step_mem = rows[i].step_mem.max(smem);
+        }
     }
-    step.remove(0);
-    let (f, s) = (median(fwd), median(step));
-    println!(
-        "| {name} | {} | {} | {batch} | {f:.3} | {s:.3} | {:.3} |",
-        net.num_params(),
-        if crop == 0 {
-            "33^3".to_string()
-        } else {
-            format!("{}^3", crop + 1)
-        },
-        s / batch as f64
-    );
+    let input = if crop == 0 {
+        "33^3".to_string()
+    } else {
+        format!("{}^3", crop + 1)
+    };
+    let stock = (median(rows[0].fwd.clone()), median(rows[0].step.clone()));
+    for (k, r) in kinds.iter().zip(&rows) {
+        let (f, s) = (median(r.fwd.clone()), median(r.step.clone()));
+        println!(
+            "| {name} | {} | {input} | {batch} | {k} | {f:.3} | {:.0} | {s:.3} | {:.0} | {:.2}x / {:.2}x | {:.0} / {:.0} |",
+            net.num_params(),
+            flops / f / 1e9,
+            3.0 * flops / s / 1e9,
+            stock.0 / f,
+            stock.1 / s,
+            r.fwd_mem as f64 / 1e6,
+            r.step_mem as f64 / 1e6,
+        );
+    }
 }
 
 fn main() {
@@ -96,11 +241,16 @@ fn main() {
         .unwrap_or(3)
         .max(1);
     println!(
-        "| network | parameters | input | batch | forward (s) | training step (s) | step per grid (s) |"
+        "GEMM ceiling (one 32768 x 3456 x 128 gemm call, {} threads): {:.0} GFLOP/s\n",
+        rayon::current_num_threads(),
+        gemm_ceiling()
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| network | parameters | input | batch | kernels | forward (s) | forward GFLOP/s | training step (s) | step GFLOP/s (3x forward FLOPs) | speed-up vs stock (forward / step) | peak MB (forward / step) |"
+    );
+    println!("|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|");
     bench(
-        "paper (width 128)",
+        "paper (width 128, P 4)",
         ModelSection::default(),
         1,
         0,

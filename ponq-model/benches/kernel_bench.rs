@@ -1,0 +1,95 @@
+//! GFLOP/s of each fast CPU kernel on the layer shapes of the paper's network (32^3 cells,
+//! width 128) and of `configs/cpu.toml`'s (8 crops of 16^3 cells, width 32).
+//! `cargo bench -p ponq-model --bench kernel_bench`; `train_bench` (ponq-train) gives the
+//! whole network and the GEMM ceiling.
+
+use std::time::Instant;
+
+use ponq_model::fast::kernels::*;
+
+fn best(mut f: impl FnMut(), n: usize) -> f64 {
+    let mut b = f64::MAX;
+    for _ in 0..n {
+        let t = Instant::now();
+        f();
+        b = b.min(t.elapsed().as_secs_f64());
+    }
+    b
+}
+
+fn values(n: usize, m: usize) -> Vec<f32> {
+    (0..n).map(|i| (i % m) as f32 * 0.1 - 0.3).collect()
+}
+
+fn main() {
+    println!("| layer | shape | kernel | ms | GFLOP/s |\n|---|---|---|---:|---:|");
+    for (d, c, batch) in [(32usize, 128usize, 1usize), (16, 32, 8)] {
+        let s = ConvShape {
+            batch,
+            dims: [d; 3],
+            cin: c,
+            cout: c,
+            k: 3,
+            pad: 1,
+        };
+        let name = format!("{batch} x {d}^3, {c} channels");
+        let x = values(s.in_rows() * c, 7);
+        let w: Vec<f32> = values(c * c * 27, 5).iter().map(|v| v * 0.1).collect();
+        let b = vec![0.1f32; c];
+        let gz = values(s.out_rows() * c, 3);
+        let flops = 2.0 * (s.out_rows() * 27 * c * c) as f64;
+        let packed = pack_weight(&w, &s, false);
+        let row = |kernel: &str, t: f64, f: f64| {
+            println!(
+                "| k3 conv | {name} | {kernel} | {:.2} | {:.0} |",
+                t * 1e3,
+                f / t / 1e9
+            )
+        };
+        let t = best(
+            || {
+                std::hint::black_box(conv_forward(&x, &s, &packed, Some(&b), Act::Leaky(0.01)));
+            },
+            3,
+        );
+        row("forward", t, flops);
+        let t = best(
+            || drop(std::hint::black_box(conv_input_grad(&s, &w, &gz))),
+            3,
+        );
+        row("input gradient", t, flops);
+        let t = best(
+            || drop(std::hint::black_box(conv_weight_grad(&x, &s, &gz))),
+            3,
+        );
+        row("weight gradient", t, flops);
+        let rows = s.out_rows();
+        let wl: Vec<f32> = values(c * c, 5).iter().map(|v| v * 0.1).collect();
+        let lf = 2.0 * (rows * c * c) as f64;
+        let xl = &x[..rows * c];
+        let t = best(
+            || {
+                std::hint::black_box(linear_forward(xl, c, &wl, &b, Some(&gz), Act::Leaky(0.01)));
+            },
+            5,
+        );
+        println!(
+            "| 1x1x1 + residual | {name} | forward | {:.2} | {:.0} |",
+            t * 1e3,
+            lf / t / 1e9
+        );
+        let t = best(
+            || {
+                drop(std::hint::black_box(linear_backward(
+                    xl, c, &wl, &gz, c, true, true,
+                )))
+            },
+            5,
+        );
+        println!(
+            "| 1x1x1 | {name} | backward (dX, dW) | {:.2} | {:.0} |",
+            t * 1e3,
+            2.0 * lf / t / 1e9
+        );
+    }
+}

@@ -1,0 +1,812 @@
+//! Slice-level `f32` kernels of the fast CPU path (no Burn types): 3D convolutions and 1x1x1
+//! layers on channels-last activations, forward and backward, with bias, LeakyReLU and the
+//! residual add fused into the GEMM epilogue.
+//!
+//! Layouts: activations are `[rows, channels]` row-major, where the rows of a grid are its
+//! nodes in C order (`[B, D1, D2, D3, C]`); weights keep Burn's `Conv3d` layout
+//! `[Cout, Cin, k, k, k]` (so checkpoints are shared with the stock path) and are repacked per
+//! call (cheap: at most 0.4 M values against tens of millions of activation values).
+//!
+//! GEMMs are the `gemm` crate's (the one Burn's `flex` backend uses): it picks its AVX-512,
+//! AVX2+FMA or scalar micro-kernel at run time (`x86-v4` feature), so the build needs no
+//! `target-cpu` flag. A convolution is an im2col GEMM over tiles of output rows: each tile's
+//! im2col block stays in cache and the tiles run in parallel on rayon's threads (one GEMM
+//! call per tile, no nested parallelism). The backward of a convolution is the same kernel
+//! on the output gradient with the flipped, transposed weights (input gradient) and a
+//! per-thread sum of `im2col(x)^T dZ` (weight gradient).
+//!
+//! Invariants the callers keep (checked with `assert!`, they are programming errors, never
+//! user input): slice lengths match the shapes, `d + 2 pad >= k` on every axis.
+
+use gemm::{Parallelism, gemm};
+use rayon::prelude::*;
+
+/// Activation fused after a layer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Act {
+    /// None (the decoder heads).
+    Identity,
+    /// LeakyReLU with this negative slope.
+    Leaky(f32),
+}
+
+impl Act {
+    #[inline]
+    fn apply(self, z: f32) -> f32 {
+        match self {
+            Act::Identity => z,
+            Act::Leaky(s) => {
+                if z > 0.0 {
+                    z
+                } else {
+                    s * z
+                }
+            }
+        }
+    }
+
+    /// Derivative at the pre-activation whose activation is `y` (`y > 0` exactly when the
+    /// pre-activation is: the slope is positive).
+    #[inline]
+    fn slope_at_output(self, y: f32) -> f32 {
+        match self {
+            Act::Identity => 1.0,
+            Act::Leaky(s) => {
+                if y > 0.0 {
+                    1.0
+                } else {
+                    s
+                }
+            }
+        }
+    }
+}
+
+/// `dst[m, n] (+)= lhs[m, k] * rhs[k, n]` with explicit row / column strides, on this thread.
+///
+/// # Safety
+/// The strided extents must lie inside the slices; `dst` must not overlap the inputs.
+#[allow(clippy::too_many_arguments)]
+unsafe fn mm(
+    m: usize,
+    n: usize,
+    k: usize,
+    dst: &mut [f32],
+    dst_rs: usize,
+    accumulate: bool,
+    lhs: &[f32],
+    (lhs_rs, lhs_cs): (usize, usize),
+    rhs: &[f32],
+    (rhs_rs, rhs_cs): (usize, usize),
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !accumulate {
+            for r in 0..m {
+                dst[r * dst_rs..r * dst_rs + n].fill(0.0);
+            }
+        }
+        return;
+    }
+    debug_assert!((m - 1) * dst_rs + n <= dst.len());
+    debug_assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len());
+    debug_assert!((k - 1) * rhs_rs + (n - 1) * rhs_cs < rhs.len());
+    // SAFETY: the caller guarantees the strided extents are inside the slices (checked in
+    // debug builds above); `dst` is a unique borrow, so it does not alias `lhs` / `rhs`.
+    unsafe {
+        gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            dst_rs as isize,
+            accumulate,
+            lhs.as_ptr(),
+            lhs_cs as isize,
+            lhs_rs as isize,
+            rhs.as_ptr(),
+            rhs_cs as isize,
+            rhs_rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            Parallelism::None,
+        )
+    }
+}
+
+/// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
+/// per core); measured best for widths 32 and 128 (`examples/kernel_rates.rs`).
+fn tile_rows(kdim: usize) -> usize {
+    ((1 << 17) / kdim.max(1)).clamp(128, 256)
+}
+
+/// Bias, residual and activation on a block of rows of `n` channels, in place.
+fn epilogue(y: &mut [f32], n: usize, bias: &[f32], residual: Option<&[f32]>, act: Act) {
+    match residual {
+        Some(r) => {
+            for (row, rr) in y.chunks_exact_mut(n).zip(r.chunks_exact(n)) {
+                for ((v, b), x) in row.iter_mut().zip(bias).zip(rr) {
+                    *v = act.apply(*v + b + x);
+                }
+            }
+        }
+        None => {
+            for row in y.chunks_exact_mut(n) {
+                for (v, b) in row.iter_mut().zip(bias) {
+                    *v = act.apply(*v + b);
+                }
+            }
+        }
+    }
+}
+
+/// `dZ = dY * act'(Y)` (a copy of `dY` for the identity).
+pub fn activation_grad(y: &[f32], gy: &[f32], act: Act) -> Vec<f32> {
+    assert_eq!(y.len(), gy.len());
+    let mut gz = vec![0.0f32; gy.len()];
+    gz.par_chunks_mut(1 << 14)
+        .zip(gy.par_chunks(1 << 14).zip(y.par_chunks(1 << 14)))
+        .for_each(|(z, (g, y))| {
+            for ((z, g), y) in z.iter_mut().zip(g).zip(y) {
+                *z = g * act.slope_at_output(*y);
+            }
+        });
+    gz
+}
+
+/// Reductions over rows are split into this many parts, whatever the thread count, and the
+/// parts are summed in order: results are the same on every machine and thread count (exact
+/// resume of a training run depends on it).
+const PARTS: usize = 8;
+
+/// Row ranges of the [`PARTS`] parts of `rows` rows (in units of `unit` rows).
+fn parts(rows: usize, unit: usize) -> Vec<(usize, usize)> {
+    let units = rows.div_ceil(unit.max(1));
+    let per = units.div_ceil(PARTS).max(1);
+    (0..units.div_ceil(per))
+        .map(|p| (p * per * unit, ((p + 1) * per * unit).min(rows)))
+        .collect()
+}
+
+/// Sum over rows of a `[rows, n]` block (the bias gradient).
+pub fn column_sums(g: &[f32], n: usize) -> Vec<f32> {
+    assert!(n > 0 && g.len() % n == 0);
+    let partials: Vec<Vec<f64>> = parts(g.len() / n, 1)
+        .into_par_iter()
+        .map(|(a, b)| {
+            let mut s = vec![0.0f64; n];
+            for row in g[a * n..b * n].chunks_exact(n) {
+                for (acc, v) in s.iter_mut().zip(row) {
+                    *acc += f64::from(*v);
+                }
+            }
+            s
+        })
+        .collect();
+    let mut total = vec![0.0f64; n];
+    for p in partials {
+        total.iter_mut().zip(&p).for_each(|(a, b)| *a += b);
+    }
+    total.into_iter().map(|v| v as f32).collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// 1x1x1 layers: plain GEMMs over [rows, channels]
+// ---------------------------------------------------------------------------------------------
+
+/// Rows per tile of the 1x1x1 layers.
+const LINEAR_TILE: usize = 512;
+
+/// `[r, c]` row-major -> `[c, r]` row-major.
+fn transpose(a: &[f32], r: usize, c: usize) -> Vec<f32> {
+    let mut t = vec![0.0f32; a.len()];
+    for i in 0..r {
+        for j in 0..c {
+            t[j * r + i] = a[i * c + j];
+        }
+    }
+    t
+}
+
+/// `Y = act(X W^T + b (+ R))` for `X: [rows, cin]`, `W: [cout, cin]` (a 1x1x1 `Conv3d`
+/// weight), `b: [cout]`, `R: [rows, cout]`.
+pub fn linear_forward(
+    x: &[f32],
+    cin: usize,
+    w: &[f32],
+    bias: &[f32],
+    residual: Option<&[f32]>,
+    act: Act,
+) -> Vec<f32> {
+    let cout = bias.len();
+    assert!(cin > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    let rows = x.len() / cin;
+    if let Some(r) = residual {
+        assert_eq!(r.len(), rows * cout);
+    }
+    let mut y = vec![0.0f32; rows * cout];
+    if cout == 0 || rows == 0 {
+        return y;
+    }
+    let wt = transpose(w, cout, cin);
+    let tile = LINEAR_TILE;
+    y.par_chunks_mut(tile * cout)
+        .enumerate()
+        .for_each(|(t, yt)| {
+            let m = yt.len() / cout;
+            let r0 = t * tile;
+            let xt = &x[r0 * cin..(r0 + m) * cin];
+            // SAFETY: xt is [m, cin], wt is W^T [cin, cout], yt is [m, cout]; all in bounds
+            // by the asserts above.
+            unsafe { mm(m, cout, cin, yt, cout, false, xt, (cin, 1), &wt, (cout, 1)) };
+            let rt = residual.map(|r| &r[r0 * cout..(r0 + m) * cout]);
+            epilogue(yt, cout, bias, rt, act);
+        });
+    y
+}
+
+/// Gradients of [`linear_forward`] from `dZ` (the gradient before the activation, see
+/// [`activation_grad`]): `(dX, dW)`, each only when asked for.
+pub fn linear_backward(
+    x: &[f32],
+    cin: usize,
+    w: &[f32],
+    gz: &[f32],
+    cout: usize,
+    need_x: bool,
+    need_w: bool,
+) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+    assert!(cin > 0 && cout > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    let rows = x.len() / cin;
+    assert_eq!(gz.len(), rows * cout);
+    let gx = need_x.then(|| {
+        let mut gx = vec![0.0f32; rows * cin];
+        let tile = LINEAR_TILE;
+        gx.par_chunks_mut(tile * cin)
+            .enumerate()
+            .for_each(|(t, gxt)| {
+                let m = gxt.len() / cin;
+                let gzt = &gz[t * tile * cout..(t * tile + m) * cout];
+                // SAFETY: dZ tile [m, cout] times W [cout, cin] into [m, cin].
+                unsafe { mm(m, cin, cout, gxt, cin, false, gzt, (cout, 1), w, (cin, 1)) };
+            });
+        gx
+    });
+    let gw = need_w.then(|| {
+        // dW = dZ^T X, summed over the row parts in order.
+        let partials: Vec<Vec<f32>> = parts(rows, 1)
+            .into_par_iter()
+            .map(|(r0, r1)| {
+                let m = r1 - r0;
+                let mut p = vec![0.0f32; cout * cin];
+                let gzt = &gz[r0 * cout..(r0 + m) * cout];
+                let xt = &x[r0 * cin..(r0 + m) * cin];
+                // SAFETY: dZ^T [cout, m] (row stride 1, column stride cout) times X [m, cin].
+                unsafe {
+                    mm(
+                        cout,
+                        cin,
+                        m,
+                        &mut p,
+                        cin,
+                        false,
+                        gzt,
+                        (1, cout),
+                        xt,
+                        (cin, 1),
+                    )
+                };
+                p
+            })
+            .collect();
+        sum_partials(partials, cout * cin)
+    });
+    (gx, gw)
+}
+
+fn sum_partials(partials: Vec<Vec<f32>>, n: usize) -> Vec<f32> {
+    let mut it = partials.into_iter();
+    let mut acc = it.next().unwrap_or_else(|| vec![0.0; n]);
+    for p in it {
+        acc.iter_mut().zip(&p).for_each(|(a, b)| *a += b);
+    }
+    acc
+}
+
+// ---------------------------------------------------------------------------------------------
+// k x k x k convolutions (stride 1, symmetric zero padding) on channels-last grids
+// ---------------------------------------------------------------------------------------------
+
+/// Shape of a channels-last convolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConvShape {
+    /// Batch size.
+    pub batch: usize,
+    /// Input grid size per axis.
+    pub dims: [usize; 3],
+    /// Input channels.
+    pub cin: usize,
+    /// Output channels.
+    pub cout: usize,
+    /// Kernel size per axis.
+    pub k: usize,
+    /// Zero padding on each side of each axis.
+    pub pad: usize,
+}
+
+impl ConvShape {
+    /// Output grid size per axis: `d + 2 pad - k + 1`.
+    pub fn out_dims(&self) -> [usize; 3] {
+        self.dims.map(|d| d + 2 * self.pad + 1 - self.k)
+    }
+
+    /// Output rows (batch times output nodes).
+    pub fn out_rows(&self) -> usize {
+        self.batch * self.out_dims().iter().product::<usize>()
+    }
+
+    /// Input rows.
+    pub fn in_rows(&self) -> usize {
+        self.batch * self.dims.iter().product::<usize>()
+    }
+
+    /// Length of an im2col row: `k^3 cin`.
+    pub fn kdim(&self) -> usize {
+        self.k * self.k * self.k * self.cin
+    }
+
+    /// The convolution whose forward is this one's input gradient: the output grid as input,
+    /// channels swapped, padding `k - 1 - pad`.
+    pub fn transposed(&self) -> ConvShape {
+        ConvShape {
+            batch: self.batch,
+            dims: self.out_dims(),
+            cin: self.cout,
+            cout: self.cin,
+            k: self.k,
+            pad: self.k - 1 - self.pad,
+        }
+    }
+
+    fn check(&self) {
+        assert!(self.k >= 1 && self.pad < self.k, "{self:?}");
+        assert!(
+            self.dims.iter().all(|&d| d + 2 * self.pad >= self.k),
+            "{self:?}"
+        );
+    }
+}
+
+/// Fills `col` (`[m, k^3 cin]`) with the im2col rows of output rows `r0 .. r0 + m`.
+fn im2col(x: &[f32], s: &ConvShape, r0: usize, m: usize, col: &mut [f32]) {
+    let [o1, o2, o3] = s.out_dims();
+    let [d1, d2, d3] = s.dims;
+    let (k, cin) = (s.k, s.cin);
+    let pad = s.pad as isize;
+    let kd = s.kdim();
+    for r in 0..m {
+        let row = r0 + r;
+        let l = row % o3;
+        let j = (row / o3) % o2;
+        let i = (row / (o3 * o2)) % o1;
+        let b = row / (o1 * o2 * o3);
+        let dst = &mut col[r * kd..(r + 1) * kd];
+        for a in 0..k {
+            let ii = i as isize + a as isize - pad;
+            for c in 0..k {
+                let jj = j as isize + c as isize - pad;
+                let seg = &mut dst[(a * k + c) * k * cin..(a * k + c + 1) * k * cin];
+                if ii < 0 || ii >= d1 as isize || jj < 0 || jj >= d2 as isize {
+                    seg.fill(0.0);
+                    continue;
+                }
+                let line = ((b * d1 + ii as usize) * d2 + jj as usize) * d3;
+                let l0 = l as isize - pad;
+                if l0 >= 0 && l0 as usize + k <= d3 {
+                    let src = (line + l0 as usize) * cin;
+                    seg.copy_from_slice(&x[src..src + k * cin]);
+                } else {
+                    for e in 0..k {
+                        let ll = l0 + e as isize;
+                        let part = &mut seg[e * cin..(e + 1) * cin];
+                        if ll < 0 || ll >= d3 as isize {
+                            part.fill(0.0);
+                        } else {
+                            let src = (line + ll as usize) * cin;
+                            part.copy_from_slice(&x[src..src + cin]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Packs a `[cout, cin, k, k, k]` weight as the `[k^3 cin, cout]` right-hand side of the
+/// im2col GEMM (row `(offset, ci)`), or, `flipped`, as the `[k^3 cout, cin]` one of the input
+/// gradient (offsets reversed, channels swapped).
+pub fn pack_weight(w: &[f32], s: &ConvShape, flipped: bool) -> Vec<f32> {
+    let k3 = s.k * s.k * s.k;
+    let (cin, cout) = (s.cin, s.cout);
+    assert_eq!(w.len(), cout * cin * k3);
+    let mut p = vec![0.0f32; w.len()];
+    for co in 0..cout {
+        for ci in 0..cin {
+            for o in 0..k3 {
+                let v = w[(co * cin + ci) * k3 + o];
+                if flipped {
+                    p[((k3 - 1 - o) * cout + co) * cin + ci] = v;
+                } else {
+                    p[(o * cin + ci) * cout + co] = v;
+                }
+            }
+        }
+    }
+    p
+}
+
+/// `Y = act(conv(X, W) + b)` for `X: [B, D1, D2, D3, cin]` (flattened), `packed` from
+/// [`pack_weight`] (not flipped), `b: [cout]` (or none); returns `[B, O1, O2, O3, cout]`.
+pub fn conv_forward(
+    x: &[f32],
+    s: &ConvShape,
+    packed: &[f32],
+    bias: Option<&[f32]>,
+    act: Act,
+) -> Vec<f32> {
+    s.check();
+    assert_eq!(x.len(), s.in_rows() * s.cin);
+    let (kd, cout) = (s.kdim(), s.cout);
+    assert_eq!(packed.len(), kd * cout);
+    let rows = s.out_rows();
+    let mut y = vec![0.0f32; rows * cout];
+    if rows == 0 || cout == 0 {
+        return y;
+    }
+    let tile = tile_rows(kd);
+    let zero = vec![0.0f32; cout];
+    let bias = bias.unwrap_or(&zero);
+    y.par_chunks_mut(tile * cout).enumerate().for_each_init(
+        || vec![0.0f32; tile * kd],
+        |col, (t, yt)| {
+            let m = yt.len() / cout;
+            im2col(x, s, t * tile, m, col);
+            // SAFETY: col is [m, kd] (row stride kd), packed [kd, cout], yt [m, cout].
+            unsafe {
+                mm(
+                    m,
+                    cout,
+                    kd,
+                    yt,
+                    cout,
+                    false,
+                    col,
+                    (kd, 1),
+                    packed,
+                    (cout, 1),
+                )
+            };
+            if bias.iter().any(|&b| b != 0.0) || act != Act::Identity {
+                epilogue(yt, cout, bias, None, act);
+            }
+        },
+    );
+    y
+}
+
+/// Weight gradient of a convolution: `dW = im2col(X)^T dZ`, as `[cout, cin, k, k, k]`.
+pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
+    s.check();
+    let (kd, cout) = (s.kdim(), s.cout);
+    let rows = s.out_rows();
+    assert_eq!(gz.len(), rows * cout);
+    assert_eq!(x.len(), s.in_rows() * s.cin);
+    let tile = tile_rows(kd);
+    let partials: Vec<Vec<f32>> = parts(rows, tile)
+        .into_par_iter()
+        .map(|(a, b)| {
+            let mut acc = vec![0.0f32; kd * cout];
+            let mut col = vec![0.0f32; tile * kd];
+            let mut first = true;
+            for r0 in (a..b).step_by(tile) {
+                let m = tile.min(b - r0);
+                im2col(x, s, r0, m, &mut col);
+                let gzt = &gz[r0 * cout..(r0 + m) * cout];
+                // SAFETY: col^T is [kd, m] (row stride 1, column stride kd), dZ tile
+                // [m, cout], acc [kd, cout].
+                unsafe {
+                    mm(
+                        kd,
+                        cout,
+                        m,
+                        &mut acc,
+                        cout,
+                        !first,
+                        &col,
+                        (1, kd),
+                        gzt,
+                        (cout, 1),
+                    )
+                };
+                first = false;
+            }
+            acc
+        })
+        .collect();
+    let g = sum_partials(partials, kd * cout);
+    // [(offset, ci), co] -> [co, ci, offset]
+    let k3 = s.k * s.k * s.k;
+    let cin = s.cin;
+    let mut out = vec![0.0f32; g.len()];
+    for o in 0..k3 {
+        for ci in 0..cin {
+            for co in 0..cout {
+                out[(co * cin + ci) * k3 + o] = g[(o * cin + ci) * cout + co];
+            }
+        }
+    }
+    out
+}
+
+/// Input gradient of a convolution: the transposed convolution of `dZ` (see
+/// [`ConvShape::transposed`]); `w` is the `[cout, cin, k, k, k]` weight.
+pub fn conv_input_grad(s: &ConvShape, w: &[f32], gz: &[f32]) -> Vec<f32> {
+    let t = s.transposed();
+    let packed = pack_weight(w, s, true);
+    conv_forward(gz, &t, &packed, None, Act::Identity)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: u64, n: usize) -> Vec<f32> {
+        let mut s = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    /// Direct (six nested loops) convolution on channels-last data.
+    fn conv_naive(x: &[f32], s: &ConvShape, w: &[f32], b: &[f32]) -> Vec<f32> {
+        let o = s.out_dims();
+        let (k, cin, cout) = (s.k, s.cin, s.cout);
+        let mut y = vec![0.0f32; s.out_rows() * cout];
+        for bb in 0..s.batch {
+            for i in 0..o[0] {
+                for j in 0..o[1] {
+                    for l in 0..o[2] {
+                        let row = ((bb * o[0] + i) * o[1] + j) * o[2] + l;
+                        for co in 0..cout {
+                            let mut acc = f64::from(b[co]);
+                            for a in 0..k {
+                                for c in 0..k {
+                                    for e in 0..k {
+                                        let p = [i + a, j + c, l + e]
+                                            .map(|v| v as isize - s.pad as isize);
+                                        if (0..3)
+                                            .any(|ax| p[ax] < 0 || p[ax] >= s.dims[ax] as isize)
+                                        {
+                                            continue;
+                                        }
+                                        let xr = ((bb * s.dims[0] + p[0] as usize) * s.dims[1]
+                                            + p[1] as usize)
+                                            * s.dims[2]
+                                            + p[2] as usize;
+                                        for ci in 0..cin {
+                                            acc += f64::from(x[xr * cin + ci])
+                                                * f64::from(
+                                                    w[(co * cin + ci) * k * k * k
+                                                        + (a * k + c) * k
+                                                        + e],
+                                                );
+                                        }
+                                    }
+                                }
+                            }
+                            y[row * cout + co] = acc as f32;
+                        }
+                    }
+                }
+            }
+        }
+        y
+    }
+
+    fn close(a: &[f32], b: &[f32], tol: f32) {
+        assert_eq!(a.len(), b.len());
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!((x - y).abs() <= tol * (1.0 + y.abs()), "[{i}] {x} vs {y}");
+        }
+    }
+
+    #[test]
+    fn conv_forward_matches_direct_loops() {
+        for s in [
+            ConvShape {
+                batch: 2,
+                dims: [4, 3, 5],
+                cin: 3,
+                cout: 4,
+                k: 3,
+                pad: 1,
+            },
+            ConvShape {
+                batch: 1,
+                dims: [5, 4, 3],
+                cin: 1,
+                cout: 5,
+                k: 2,
+                pad: 0,
+            },
+            ConvShape {
+                batch: 1,
+                dims: [3, 3, 3],
+                cin: 2,
+                cout: 3,
+                k: 3,
+                pad: 0,
+            },
+            ConvShape {
+                batch: 1,
+                dims: [2, 6, 1],
+                cin: 2,
+                cout: 2,
+                k: 2,
+                pad: 1,
+            },
+        ] {
+            let x = lcg(1, s.in_rows() * s.cin);
+            let w = lcg(2, s.cout * s.cin * s.k * s.k * s.k);
+            let b = lcg(3, s.cout);
+            let y = conv_forward(&x, &s, &pack_weight(&w, &s, false), Some(&b), Act::Identity);
+            close(&y, &conv_naive(&x, &s, &w, &b), 1e-5);
+        }
+    }
+
+    /// `<conv(x), g> = <x, conv^T(g)>` and `<conv(x), g> = <w, dW(x, g)>` on random data:
+    /// the two backward kernels are the adjoints of the forward.
+    #[test]
+    fn backward_kernels_are_the_adjoints_of_the_forward() {
+        for s in [
+            ConvShape {
+                batch: 2,
+                dims: [4, 3, 5],
+                cin: 3,
+                cout: 4,
+                k: 3,
+                pad: 1,
+            },
+            ConvShape {
+                batch: 1,
+                dims: [5, 4, 3],
+                cin: 1,
+                cout: 5,
+                k: 2,
+                pad: 0,
+            },
+            ConvShape {
+                batch: 1,
+                dims: [2, 6, 1],
+                cin: 2,
+                cout: 2,
+                k: 2,
+                pad: 1,
+            },
+        ] {
+            let x = lcg(4, s.in_rows() * s.cin);
+            let w = lcg(5, s.cout * s.cin * s.k * s.k * s.k);
+            let g = lcg(6, s.out_rows() * s.cout);
+            let y = conv_forward(&x, &s, &pack_weight(&w, &s, false), None, Act::Identity);
+            let dot = |a: &[f32], b: &[f32]| -> f64 {
+                a.iter()
+                    .zip(b)
+                    .map(|(p, q)| f64::from(*p) * f64::from(*q))
+                    .sum()
+            };
+            let lhs = dot(&y, &g);
+            let gx = conv_input_grad(&s, &w, &g);
+            let gw = conv_weight_grad(&x, &s, &g);
+            assert!(
+                (lhs - dot(&x, &gx)).abs() < 1e-4 * (1.0 + lhs.abs()),
+                "{s:?}"
+            );
+            assert!(
+                (lhs - dot(&w, &gw)).abs() < 1e-4 * (1.0 + lhs.abs()),
+                "{s:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn linear_forward_and_backward_match_direct_sums() {
+        let (rows, cin, cout) = (37, 5, 3);
+        let x = lcg(7, rows * cin);
+        let w = lcg(8, cout * cin);
+        let b = lcg(9, cout);
+        let r = lcg(10, rows * cout);
+        let act = Act::Leaky(0.01);
+        let y = linear_forward(&x, cin, &w, &b, Some(&r), act);
+        for i in 0..rows {
+            for o in 0..cout {
+                let z: f32 = (0..cin)
+                    .map(|c| x[i * cin + c] * w[o * cin + c])
+                    .sum::<f32>()
+                    + b[o]
+                    + r[i * cout + o];
+                let want = if z > 0.0 { z } else { 0.01 * z };
+                assert!((y[i * cout + o] - want).abs() < 1e-5);
+            }
+        }
+        let gz = lcg(11, rows * cout);
+        let (gx, gw) = linear_backward(&x, cin, &w, &gz, cout, true, true);
+        let (gx, gw) = (gx.unwrap(), gw.unwrap());
+        for i in 0..rows {
+            for c in 0..cin {
+                let want: f32 = (0..cout).map(|o| gz[i * cout + o] * w[o * cin + c]).sum();
+                assert!((gx[i * cin + c] - want).abs() < 1e-5);
+            }
+        }
+        for o in 0..cout {
+            for c in 0..cin {
+                let want: f32 = (0..rows).map(|i| gz[i * cout + o] * x[i * cin + c]).sum();
+                assert!((gw[o * cin + c] - want).abs() < 1e-4);
+            }
+        }
+        let sums = column_sums(&gz, cout);
+        for o in 0..cout {
+            let want: f32 = (0..rows).map(|i| gz[i * cout + o]).sum();
+            assert!((sums[o] - want).abs() < 1e-5);
+        }
+    }
+
+    /// Reductions give bit-identical results for any thread count (exact resume).
+    #[test]
+    fn gradients_do_not_depend_on_the_thread_count() {
+        let s = ConvShape {
+            batch: 2,
+            dims: [9, 8, 7],
+            cin: 5,
+            cout: 6,
+            k: 3,
+            pad: 1,
+        };
+        let x = lcg(12, s.in_rows() * s.cin);
+        let w = lcg(13, s.cout * s.cin * 27);
+        let g = lcg(14, s.out_rows() * s.cout);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    let (gx, gw) =
+                        linear_backward(&x[..s.out_rows() * 5], 5, &w[..30], &g, 6, true, true);
+                    (
+                        conv_weight_grad(&x, &s, &g),
+                        conv_input_grad(&s, &w, &g),
+                        column_sums(&g, s.cout),
+                        gx.unwrap(),
+                        gw.unwrap(),
+                    )
+                })
+        };
+        let one = run(1);
+        for t in [2, 3, 8] {
+            assert!(run(t) == one, "{t} threads");
+        }
+    }
+}

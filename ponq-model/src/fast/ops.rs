@@ -1,0 +1,444 @@
+//! The fast CPU kernels as Burn operations: a backend extension ([`PonqCpuOps`]) implemented
+//! for the `flex` CPU backend (forward only) and for `Autodiff<Flex>` (forward, and a
+//! hand-written backward registered in the autodiff graph), plus the `Tensor` wrappers the
+//! network calls ([`conv3d`], [`linear`]).
+//!
+//! The tensors are channels-last: a grid batch is `[B, D1, D2, D3, C]`, a row block
+//! `[rows, C]`. Weights and biases are the `Conv3d` parameters as they are (`[Cout, Cin, k, k,
+//! k]`, `[Cout]`), so their gradients land on the same parameters as the stock layers'.
+
+use std::borrow::Cow;
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Autodiff, Dispatch, Flex, backend_extension};
+use burn::nn::conv::Conv3d;
+use burn::prelude::*;
+use burn::tensor::DType;
+
+use super::kernels::{self, Act, ConvShape};
+
+/// The fused layers of the PoNQ network on the CPU.
+///
+/// `act` selects LeakyReLU with negative slope `slope` after the bias (and residual); without
+/// it the layer is affine.
+#[backend_extension(Flex, Autodiff)]
+pub trait PonqCpuOps: burn::backend::Backend {
+    /// `act(conv3d(x, w) + b)`, stride 1, zero padding `pad`: `x: [B, D1, D2, D3, Cin]`,
+    /// `w: [Cout, Cin, k, k, k]`, `b: [Cout]` -> `[B, O1, O2, O3, Cout]`.
+    fn conv3d_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        pad: usize,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self>;
+
+    /// `act(x w^T + b)`: `x: [rows, Cin]`, `w: [Cout, Cin, 1, 1, 1]`, `b: [Cout]`.
+    fn linear_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self>;
+
+    /// `act(x w^T + b + r)` with a residual `r: [rows, Cout]`.
+    fn linear_residual_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        r: FloatTensor<Self>,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self>;
+}
+
+fn activation(act: bool, slope: f32) -> Act {
+    if act {
+        Act::Leaky(slope)
+    } else {
+        Act::Identity
+    }
+}
+
+/// The values of an `f32` tensor in C order (borrowed when it is contiguous).
+fn values(t: &FlexTensor) -> Cow<'_, [f32]> {
+    assert_eq!(
+        t.dtype(),
+        DType::F32,
+        "the fast CPU kernels take f32 tensors (got {:?}); use the stock layers for other types",
+        t.dtype()
+    );
+    let n = t.layout().num_elements();
+    if t.is_contiguous() {
+        let off = t.layout().start_offset();
+        Cow::Borrowed(&t.storage::<f32>()[off..off + n])
+    } else {
+        let c = t.to_contiguous();
+        let off = c.layout().start_offset();
+        Cow::Owned(c.storage::<f32>()[off..off + n].to_vec())
+    }
+}
+
+fn dims(t: &FlexTensor) -> Vec<usize> {
+    t.layout().shape().iter().copied().collect()
+}
+
+fn tensor(v: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(v, shape))
+}
+
+fn conv_shape(x: &FlexTensor, w: &FlexTensor, pad: usize) -> ConvShape {
+    let xd = dims(x);
+    let wd = dims(w);
+    assert!(
+        xd.len() == 5 && wd.len() == 5,
+        "conv3d_cl: x {xd:?}, w {wd:?}"
+    );
+    assert!(
+        wd[2] == wd[3] && wd[3] == wd[4] && wd[1] == xd[4],
+        "conv3d_cl: x {xd:?}, w {wd:?}"
+    );
+    ConvShape {
+        batch: xd[0],
+        dims: [xd[1], xd[2], xd[3]],
+        cin: xd[4],
+        cout: wd[0],
+        k: wd[2],
+        pad,
+    }
+}
+
+fn conv_forward(
+    x: &FlexTensor,
+    w: &FlexTensor,
+    b: &FlexTensor,
+    s: &ConvShape,
+    act: Act,
+) -> FlexTensor {
+    let packed = kernels::pack_weight(&values(w), s, false);
+    let y = kernels::conv_forward(&values(x), s, &packed, Some(&values(b)), act);
+    let o = s.out_dims();
+    tensor(y, vec![s.batch, o[0], o[1], o[2], s.cout])
+}
+
+fn linear_forward(
+    x: &FlexTensor,
+    w: &FlexTensor,
+    b: &FlexTensor,
+    r: Option<&FlexTensor>,
+    act: Act,
+) -> FlexTensor {
+    let xd = dims(x);
+    let wd = dims(w);
+    assert!(
+        xd.len() == 2 && wd.len() == 5 && wd[1] == xd[1],
+        "linear_cl: x {xd:?}, w {wd:?}"
+    );
+    let rv = r.map(values);
+    let y = kernels::linear_forward(
+        &values(x),
+        xd[1],
+        &values(w),
+        &values(b),
+        rv.as_deref(),
+        act,
+    );
+    tensor(y, vec![xd[0], wd[0]])
+}
+
+impl PonqCpuOps for Flex {
+    fn conv3d_cl(
+        x: FlexTensor,
+        w: FlexTensor,
+        b: FlexTensor,
+        pad: usize,
+        act: bool,
+        slope: f32,
+    ) -> FlexTensor {
+        let s = conv_shape(&x, &w, pad);
+        conv_forward(&x, &w, &b, &s, activation(act, slope))
+    }
+
+    fn linear_cl(x: FlexTensor, w: FlexTensor, b: FlexTensor, act: bool, slope: f32) -> FlexTensor {
+        linear_forward(&x, &w, &b, None, activation(act, slope))
+    }
+
+    fn linear_residual_cl(
+        x: FlexTensor,
+        w: FlexTensor,
+        b: FlexTensor,
+        r: FlexTensor,
+        act: bool,
+        slope: f32,
+    ) -> FlexTensor {
+        linear_forward(&x, &w, &b, Some(&r), activation(act, slope))
+    }
+}
+
+/// Backward of [`PonqCpuOps::conv3d_cl`]; parents `[x, w, b]`.
+#[derive(Debug)]
+struct ConvBackward;
+
+impl Backward<Flex, 3> for ConvBackward {
+    /// `(x, w, y, shape, activation)`.
+    type State = (FlexTensor, FlexTensor, FlexTensor, ConvShape, Act);
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_w, node_b] = ops.parents;
+        let gy = grads.consume::<Flex>(&ops.node);
+        let (x, w, y, s, act) = ops.state;
+        let gz = kernels::activation_grad(&values(&y), &values(&gy), act);
+        if let Some(node) = node_b {
+            grads.register::<Flex>(
+                node.id,
+                tensor(kernels::column_sums(&gz, s.cout), vec![s.cout]),
+            );
+        }
+        if let Some(node) = node_w {
+            let gw = kernels::conv_weight_grad(&values(&x), &s, &gz);
+            grads.register::<Flex>(node.id, tensor(gw, dims(&w)));
+        }
+        if let Some(node) = node_x {
+            let gx = kernels::conv_input_grad(&s, &values(&w), &gz);
+            grads.register::<Flex>(node.id, tensor(gx, dims(&x)));
+        }
+    }
+}
+
+/// Backward of [`PonqCpuOps::linear_cl`] (`N = 3`: `[x, w, b]`) and
+/// [`PonqCpuOps::linear_residual_cl`] (`N = 4`: `[x, w, b, r]`).
+#[derive(Debug)]
+struct LinearBackward;
+
+/// `(x, w, y, activation)`.
+type LinearState = (FlexTensor, FlexTensor, FlexTensor, Act);
+
+/// `(dZ, dX, dW, db)`, the last three when asked for.
+type LinearGrads = (
+    Vec<f32>,
+    Option<Vec<f32>>,
+    Option<Vec<f32>>,
+    Option<Vec<f32>>,
+);
+
+fn linear_grads(
+    state: LinearState,
+    gy: FlexTensor,
+    need_x: bool,
+    need_w: bool,
+    need_b: bool,
+) -> LinearGrads {
+    let (x, w, y, act) = state;
+    let xd = dims(&x);
+    let wd = dims(&w);
+    let gz = kernels::activation_grad(&values(&y), &values(&gy), act);
+    let (gx, gw) =
+        kernels::linear_backward(&values(&x), xd[1], &values(&w), &gz, wd[0], need_x, need_w);
+    let gb = need_b.then(|| kernels::column_sums(&gz, wd[0]));
+    (gz, gx, gw, gb)
+}
+
+impl Backward<Flex, 3> for LinearBackward {
+    type State = LinearState;
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_w, node_b] = ops.parents;
+        let gy = grads.consume::<Flex>(&ops.node);
+        let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
+        let (_, gx, gw, gb) = linear_grads(
+            ops.state,
+            gy,
+            node_x.is_some(),
+            node_w.is_some(),
+            node_b.is_some(),
+        );
+        register(grads, node_x.map(|n| n.id), gx, xd);
+        register(grads, node_w.map(|n| n.id), gw, wd.clone());
+        register(grads, node_b.map(|n| n.id), gb, vec![wd[0]]);
+    }
+}
+
+/// The residual op's backward: `LinearBackward` plus `dR = dZ`.
+#[derive(Debug)]
+struct LinearResidualBackward;
+
+impl Backward<Flex, 4> for LinearResidualBackward {
+    type State = LinearState;
+
+    fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_w, node_b, node_r] = ops.parents;
+        let gy = grads.consume::<Flex>(&ops.node);
+        let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
+        let (gz, gx, gw, gb) = linear_grads(
+            ops.state,
+            gy,
+            node_x.is_some(),
+            node_w.is_some(),
+            node_b.is_some(),
+        );
+        register(grads, node_x.map(|n| n.id), gx, xd.clone());
+        register(grads, node_w.map(|n| n.id), gw, wd.clone());
+        register(grads, node_b.map(|n| n.id), gb, vec![wd[0]]);
+        register(grads, node_r.map(|n| n.id), Some(gz), vec![xd[0], wd[0]]);
+    }
+}
+
+fn register(
+    grads: &mut Gradients,
+    id: Option<burn::backend::autodiff::NodeId>,
+    g: Option<Vec<f32>>,
+    shape: Vec<usize>,
+) {
+    if let (Some(id), Some(g)) = (id, g) {
+        grads.register::<Flex>(id, tensor(g, shape));
+    }
+}
+
+impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
+    fn conv3d_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        pad: usize,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self> {
+        let act = activation(act, slope);
+        let s = conv_shape(x.primitive(), w.primitive(), pad);
+        match ConvBackward
+            .prepare::<C>([x.node(), w.node(), b.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
+                let y = conv_forward(&xp, &wp, b.primitive(), &s, act);
+                prep.finish((xp, wp, y.clone(), s, act), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(conv_forward(
+                x.primitive(),
+                w.primitive(),
+                b.primitive(),
+                &s,
+                act,
+            )),
+        }
+    }
+
+    fn linear_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self> {
+        let act = activation(act, slope);
+        match LinearBackward
+            .prepare::<C>([x.node(), w.node(), b.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
+                let y = linear_forward(&xp, &wp, b.primitive(), None, act);
+                prep.finish((xp, wp, y.clone(), act), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(linear_forward(
+                x.primitive(),
+                w.primitive(),
+                b.primitive(),
+                None,
+                act,
+            )),
+        }
+    }
+
+    fn linear_residual_cl(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+        r: FloatTensor<Self>,
+        act: bool,
+        slope: f32,
+    ) -> FloatTensor<Self> {
+        let act = activation(act, slope);
+        match LinearResidualBackward
+            .prepare::<C>([x.node(), w.node(), b.node(), r.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
+                let y = linear_forward(&xp, &wp, b.primitive(), Some(r.primitive()), act);
+                prep.finish((xp, wp, y.clone(), act), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(linear_forward(
+                x.primitive(),
+                w.primitive(),
+                b.primitive(),
+                Some(r.primitive()),
+                act,
+            )),
+        }
+    }
+}
+
+/// Weight and bias of a `Conv3d` (a zero bias when it has none).
+fn params(conv: &Conv3d) -> (Tensor<5>, Tensor<1>) {
+    let w = conv.weight.val();
+    let b = match &conv.bias {
+        Some(b) => b.val(),
+        None => Tensor::<1>::zeros([w.dims()[0]], &w.device()),
+    };
+    (w, b)
+}
+
+/// `conv`'s weights on a channels-last grid batch `[B, D1, D2, D3, Cin]`, stride 1, zero
+/// padding `pad`, then LeakyReLU with slope `leaky` when given.
+pub fn conv3d(x: Tensor<5>, conv: &Conv3d, pad: usize, leaky: Option<f32>) -> Tensor<5> {
+    let (w, b) = params(conv);
+    Tensor::from_dispatch(<Dispatch as PonqCpuOps>::conv3d_cl(
+        x.into_dispatch(),
+        w.into_dispatch(),
+        b.into_dispatch(),
+        pad,
+        leaky.is_some(),
+        leaky.unwrap_or(0.0),
+    ))
+}
+
+/// A 1x1x1 `conv` on rows `[rows, Cin]`, plus `residual` `[rows, Cout]` when given, then
+/// LeakyReLU with slope `leaky` when given.
+pub fn linear(
+    x: Tensor<2>,
+    conv: &Conv3d,
+    residual: Option<Tensor<2>>,
+    leaky: Option<f32>,
+) -> Tensor<2> {
+    let (w, b) = params(conv);
+    let (act, slope) = (leaky.is_some(), leaky.unwrap_or(0.0));
+    Tensor::from_dispatch(match residual {
+        Some(r) => <Dispatch as PonqCpuOps>::linear_residual_cl(
+            x.into_dispatch(),
+            w.into_dispatch(),
+            b.into_dispatch(),
+            r.into_dispatch(),
+            act,
+            slope,
+        ),
+        None => <Dispatch as PonqCpuOps>::linear_cl(
+            x.into_dispatch(),
+            w.into_dispatch(),
+            b.into_dispatch(),
+            act,
+            slope,
+        ),
+    })
+}

@@ -1,0 +1,199 @@
+//! The fast CPU kernels against Burn's stock layers: the same network (same parameters) run
+//! both ways gives the same outputs, the same gradient for every parameter and the same
+//! gradient for the input, on random inputs of odd sizes, crops, batches, widths 8 / 32 / 128
+//! and P = 1 / 4.
+
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
+use burn::optim::GradientsParams;
+use burn::prelude::*;
+use ponq_model::{GridFrame, Kernels, PonqNet, PonqNetConfig, PonqOutput, backend};
+
+fn random(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+fn tensor<const D: usize>(v: Vec<f32>, shape: [usize; D], d: &Device) -> Tensor<D> {
+    let n = v.len();
+    Tensor::<1>::from_data(TensorData::new(v, [n]), d).reshape(shape)
+}
+
+fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
+}
+
+/// A scalar that depends on every output: a fixed random projection of each.
+fn projection(out: &PonqOutput, seed: u64, d: &Device) -> Tensor<1> {
+    let proj = |t: Tensor<4>, s: u64| {
+        let dims = t.dims();
+        let r = tensor(random(dims.iter().product(), s), dims, d);
+        (t * r).sum()
+    };
+    let occ = out.occupancy.clone();
+    let od = occ.dims();
+    proj(out.points.clone(), seed)
+        + proj(out.vstars.clone(), seed + 1)
+        + proj(out.normals.clone(), seed + 2)
+        + proj(out.cholesky.clone(), seed + 3)
+        + (occ * tensor(random(od[0] * od[1], seed + 4), od, d)).sum()
+}
+
+struct Collect<'a> {
+    grads: &'a GradientsParams,
+    out: Vec<(ParamId, Vec<f32>)>,
+}
+
+impl ModuleVisitor for Collect<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let g = self
+            .grads
+            .get::<D>(param.id)
+            .map(values)
+            .unwrap_or_default();
+        self.out.push((param.id, g));
+    }
+}
+
+/// Outputs, parameter gradients and input gradient of a run.
+type Run = (Vec<Vec<f32>>, Vec<(ParamId, Vec<f32>)>, Vec<f32>);
+
+/// Outputs, parameter gradients and input gradient of `net` on `x`.
+fn run(net: &PonqNet, x: &Tensor<5>, frame: &GridFrame, d: &Device) -> Run {
+    let x = x.clone().require_grad();
+    let out = net.forward(x.clone(), frame);
+    let outs = vec![
+        values(out.points.clone()),
+        values(out.vstars.clone()),
+        values(out.normals.clone()),
+        values(out.cholesky.clone()),
+        values(out.occupancy.clone()),
+    ];
+    let grads = projection(&out, 11, d).backward();
+    let gx = values(x.grad(&grads).expect("input gradient"));
+    let gp = GradientsParams::from_grads(grads, net);
+    let mut c = Collect {
+        grads: &gp,
+        out: Vec::new(),
+    };
+    net.visit(&mut c);
+    (outs, c.out, gx)
+}
+
+/// Largest difference relative to the largest magnitude.
+fn rel_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+        / scale
+}
+
+#[allow(clippy::too_many_arguments)]
+fn check(
+    width: usize,
+    p: usize,
+    layers: usize,
+    blocks: usize,
+    batch: usize,
+    nodes: [usize; 3],
+    frame: GridFrame,
+    seed: u64,
+) {
+    let d = backend::cpu().autodiff();
+    let cfg = PonqNetConfig::new()
+        .with_width(width)
+        .with_points_per_cell(p)
+        .with_encoder_layers(layers)
+        .with_decoder_blocks(blocks);
+    let fast = cfg.init(&d);
+    assert_eq!(fast.kernels(), Kernels::Fast, "fast is the default");
+    assert!(fast.uses_fast_kernels(&d));
+    let stock = fast.clone().with_kernels(Kernels::Stock);
+    assert!(!stock.uses_fast_kernels(&d));
+    let n: usize = nodes.iter().product();
+    let x = tensor(
+        random(batch * n, seed),
+        [batch, 1, nodes[0], nodes[1], nodes[2]],
+        &d,
+    );
+    let (of, gf, xf) = run(&fast, &x, &frame, &d);
+    let (os, gs, xs) = run(&stock, &x, &frame, &d);
+    let case = format!("width {width}, P {p}, batch {batch}, nodes {nodes:?}");
+    for (i, (a, b)) in of.iter().zip(&os).enumerate() {
+        let e = rel_diff(a, b);
+        assert!(e < 1e-5, "{case}: output {i} differs by {e}");
+    }
+    assert_eq!(gf.len(), gs.len());
+    for ((ia, a), (ib, b)) in gf.iter().zip(&gs) {
+        assert_eq!(ia, ib);
+        assert!(!b.is_empty(), "{case}: stock gradient of {ia:?} missing");
+        let e = rel_diff(a, b);
+        assert!(e < 1e-4, "{case}: gradient of {ia:?} differs by {e}");
+    }
+    let e = rel_diff(&xf, &xs);
+    assert!(e < 1e-4, "{case}: input gradient differs by {e}");
+    // The gradients are not trivially zero.
+    assert!(xs.iter().any(|v| *v != 0.0));
+}
+
+#[test]
+fn fast_equals_stock_narrow_odd_sizes_and_batches() {
+    check(8, 1, 2, 1, 1, [6, 5, 7], GridFrame::whole(6), 1);
+    check(8, 4, 1, 2, 3, [5, 5, 5], GridFrame::crop(16, [3, 0, 5]), 2);
+    check(32, 4, 2, 1, 2, [4, 6, 5], GridFrame::crop(9, [1, 2, 3]), 3);
+}
+
+#[test]
+fn fast_equals_stock_paper_width() {
+    check(128, 4, 1, 1, 1, [4, 5, 4], GridFrame::whole(4), 4);
+    check(
+        128,
+        1,
+        2,
+        1,
+        2,
+        [3, 4, 3],
+        GridFrame::crop(12, [2, 2, 2]),
+        5,
+    );
+}
+
+#[test]
+fn inference_without_autodiff_equals_stock() {
+    let d = backend::cpu();
+    let net = PonqNetConfig::new()
+        .with_width(16)
+        .with_points_per_cell(4)
+        .with_encoder_layers(3)
+        .with_decoder_blocks(2)
+        .init(&d);
+    let x = tensor(random(2 * 9 * 8 * 7, 9), [2, 1, 9, 8, 7], &d);
+    let frame = GridFrame::whole(8);
+    let a = net.forward(x.clone(), &frame);
+    let b = net
+        .clone()
+        .with_kernels(Kernels::Stock)
+        .forward(x.clone(), &frame);
+    for (x, y) in [
+        (values(a.points), values(b.points)),
+        (values(a.cholesky), values(b.cholesky)),
+        (values(a.occupancy), values(b.occupancy)),
+    ] {
+        assert!(rel_diff(&x, &y) < 1e-5);
+    }
+    // The encoder features in the stock layout agree as well.
+    let fe = values(net.encode(x.clone()));
+    let se = values(net.with_kernels(Kernels::Stock).encode(x));
+    assert!(rel_diff(&fe, &se) < 1e-5);
+}

@@ -100,20 +100,7 @@ pub fn infer(
     let normalised: Vec<f64> = grid.data.iter().map(|v| v * s).collect();
     let k = network_input_scale(frame.n);
     let input: Vec<f32> = normalised.iter().map(|&v| v as f32 * k).collect();
-    let t0 = Instant::now();
-    let (pred, tiles) = predict_tiled(
-        net,
-        &input,
-        &frame,
-        encoder_layers,
-        opts.tile,
-        opts.authors_cell_base,
-        device,
-        progress,
-    )?;
-    let network = t0.elapsed();
     // Close mask over the cells.
-    let t1 = Instant::now();
     let [c0, c1, c2] = frame.cells;
     let thr = 2.0 * 3f64.sqrt() / (frame.n as f64 + 1.0);
     let node = |i: usize, j: usize, k: usize| normalised[(i * (c1 + 1) + j) * (c2 + 1) + k];
@@ -127,6 +114,20 @@ pub fn infer(
             }
         }
     }
+    let t0 = Instant::now();
+    let (pred, tiles) = predict_tiled(
+        net,
+        &input,
+        &frame,
+        encoder_layers,
+        opts.tile,
+        opts.authors_cell_base,
+        Some(&close),
+        device,
+        progress,
+    )?;
+    let network = t0.elapsed();
+    let t1 = Instant::now();
     let kept = pred.kept_cells(opts.occupancy_threshold, Some(&close))?;
     let (mut ponq, cells) = pred.to_ponq(&kept)?;
     let mut grid_scale = frame.n as f64;

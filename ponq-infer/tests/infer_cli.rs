@@ -103,8 +103,10 @@ fn tiles_give_the_same_prediction_as_one_pass() {
     let g = box_grid(11, [0.5, 0.4, 0.3], 0.2);
     let frame = Frame::of(&g, ([-1.0; 3], [1.0; 3])).unwrap();
     let input: Vec<f32> = g.data.iter().map(|&v| v as f32 * 11.0 / 32.0).collect();
-    let (whole, t1) = predict_tiled(&net, &input, &frame, 2, 64, false, &dev, |_, _| {}).unwrap();
-    let (tiled, t2) = predict_tiled(&net, &input, &frame, 2, 4, false, &dev, |_, _| {}).unwrap();
+    let (whole, t1) =
+        predict_tiled(&net, &input, &frame, 2, 64, false, None, &dev, |_, _| {}).unwrap();
+    let (tiled, t2) =
+        predict_tiled(&net, &input, &frame, 2, 4, false, None, &dev, |_, _| {}).unwrap();
     assert_eq!(t1, 1);
     assert_eq!(t2, 27);
     for (name, a, b) in [
@@ -119,8 +121,50 @@ fn tiles_give_the_same_prediction_as_one_pass() {
             .fold(0f32, f32::max);
         assert!(worst < 1e-4, "{name}: tiles differ by {worst}");
     }
+    // Tiles without a needed cell are skipped; needed cells keep their prediction.
+    let cells = 11 * 11 * 11;
+    let needed: Vec<bool> = (0..cells).map(|c| c % 11 < 3 && c / 121 < 4).collect();
+    let (part, t3) = predict_tiled(
+        &net,
+        &input,
+        &frame,
+        2,
+        4,
+        false,
+        Some(&needed),
+        &dev,
+        |_, _| {},
+    )
+    .unwrap();
+    assert!(t3 < 27 && t3 > 0, "{t3} tiles");
+    let p = net.points_per_cell();
+    for (c, &n) in needed.iter().enumerate() {
+        if n {
+            assert_eq!(part.occupancy[c], tiled.occupancy[c], "cell {c}");
+            assert_eq!(
+                part.points[c * p * 3..(c + 1) * p * 3],
+                tiled.points[c * p * 3..(c + 1) * p * 3]
+            );
+        }
+    }
+    assert!(
+        predict_tiled(
+            &net,
+            &input,
+            &frame,
+            2,
+            4,
+            false,
+            Some(&needed[1..]),
+            &dev,
+            |_, _| {}
+        )
+        .is_err(),
+        "a mask of the wrong size is an error"
+    );
     // A margin smaller than the encoder's reach changes the border cells of tiles.
-    let (short, _) = predict_tiled(&net, &input, &frame, 0, 4, false, &dev, |_, _| {}).unwrap();
+    let (short, _) =
+        predict_tiled(&net, &input, &frame, 0, 4, false, None, &dev, |_, _| {}).unwrap();
     assert!(
         whole
             .occupancy
@@ -233,6 +277,7 @@ fn built_in_model_equals_the_shipped_file() {
         file_cfg.encoder_layers,
         64,
         false,
+        None,
         &dev,
         |_, _| {},
     )
@@ -244,6 +289,7 @@ fn built_in_model_equals_the_shipped_file() {
         emb_cfg.encoder_layers,
         64,
         false,
+        None,
         &dev,
         |_, _| {},
     )

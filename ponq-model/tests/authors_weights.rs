@@ -5,6 +5,7 @@
 
 use std::io::Write;
 
+use burn::prelude::*;
 use burn::store::ModuleSnapshot;
 use ponq_model::{PonqNetConfig, backend, weights};
 
@@ -179,6 +180,40 @@ fn authors_state_dict_loads_every_parameter_in_place() {
         for (i, v) in vals.iter().enumerate().step_by(97) {
             assert_eq!(*v, value(ki, i), "{key}[{i}]");
         }
+    }
+    // The loaded network runs the same on the fast CPU kernels and on the stock layers.
+    let n = 6;
+    let x = Tensor::<1>::from_data(
+        TensorData::new(
+            (0..(n + 1) * (n + 1) * (n + 1))
+                .map(|i| ((i * 37) % 23) as f32 / 23.0 - 0.5)
+                .collect::<Vec<f32>>(),
+            [(n + 1) * (n + 1) * (n + 1)],
+        ),
+        &dev,
+    )
+    .reshape([1, 1, n + 1, n + 1, n + 1]);
+    let mut frame = ponq_model::GridFrame::whole(n);
+    frame.authors_cell_base = true;
+    let fast = net.forward(x.clone(), &frame);
+    let stock = net
+        .clone()
+        .with_kernels(ponq_model::Kernels::Stock)
+        .forward(x, &frame);
+    for (a, b) in [
+        (fast.points, stock.points),
+        (fast.normals, stock.normals),
+        (fast.cholesky, stock.cholesky),
+    ] {
+        let a = a.into_data().try_to_vec::<f32>().unwrap();
+        let b = b.into_data().try_to_vec::<f32>().unwrap();
+        let scale = b.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(worst <= 1e-5 * scale, "fast vs stock: {worst} of {scale}");
     }
     // A state dict with a missing tensor is refused with a message.
     let short = dir.join("short.pt");

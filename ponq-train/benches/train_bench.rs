@@ -2,8 +2,9 @@
 //! CPU kernels (`ponq_model::fast`), forward and training step, with their GFLOP/s, peak
 //! memory, and the machine's GEMM rate (one large `gemm` call) as the ceiling.
 //!
-//! `cargo bench -p ponq-train --bench train_bench [REPS]` (default 3 repetitions, medians; the
-//! stock and fast runs alternate so that the machine's drift hits both alike).
+//! `cargo bench -p ponq-train --bench train_bench [REPS] [paper|cpu]` (default 3 repetitions,
+//! medians, both cases; the stock and fast runs alternate so that the machine's drift hits
+//! both alike).
 //! `ponq-train/benches/side_by_side.sh` also runs the same network in PyTorch.
 //!
 //! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipe's
@@ -235,11 +236,16 @@ fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: us
 }
 
 fn main() {
-    let reps = std::env::args()
-        .skip(1)
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let reps = args
+        .iter()
         .find_map(|a| a.parse::<usize>().ok())
         .unwrap_or(3)
         .max(1);
+    // Case filter: `paper` or `cpu` (default both).
+    let want = |case: &str| {
+        !args.iter().any(|a| a == "paper" || a == "cpu") || args.iter().any(|a| a == case)
+    };
     println!(
         "GEMM ceiling (one 32768 x 3456 x 128 gemm call, {} threads): {:.0} GFLOP/s\n",
         rayon::current_num_threads(),
@@ -249,20 +255,24 @@ fn main() {
         "| network | parameters | input | batch | kernels | forward (s) | forward GFLOP/s | training step (s) | step GFLOP/s (3x forward FLOPs) | speed-up vs stock (forward / step) | peak MB (forward / step) |"
     );
     println!("|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|");
-    bench(
-        "paper (width 128, P 4)",
-        ModelSection::default(),
-        1,
-        0,
-        100_000,
-        reps,
-    );
+    if want("paper") {
+        bench(
+            "paper (width 128, P 4)",
+            ModelSection::default(),
+            1,
+            0,
+            100_000,
+            reps,
+        );
+    }
     let cpu = ModelSection {
         width: 32,
         points_per_cell: 4,
         encoder_layers: 4,
         decoder_blocks: 3,
     };
-    bench("cpu.toml (width 32)", cpu.clone(), 1, 16, 16_000, reps);
-    bench("cpu.toml (width 32)", cpu, 8, 16, 16_000, reps);
+    if want("cpu") {
+        bench("cpu.toml (width 32)", cpu.clone(), 1, 16, 16_000, reps);
+        bench("cpu.toml (width 32)", cpu, 8, 16, 16_000, reps);
+    }
 }

@@ -19,6 +19,7 @@
 //!     resume: false,
 //!     device: ponq_model::backend::cpu(),
 //!     quiet: false,
+//!     kernels: ponq_model::Kernels::Fast,
 //! };
 //! let summary = train::run(&cfg, &opts).unwrap();
 //! println!("{} epochs", summary.epochs_done);

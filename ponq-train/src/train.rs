@@ -36,6 +36,9 @@ pub struct RunOptions {
     pub device: Device,
     /// No progress bars or messages.
     pub quiet: bool,
+    /// Layer implementation on the CPU (the fast kernels by default; the weights and the
+    /// numbers are the same up to float rounding).
+    pub kernels: ponq_model::Kernels,
 }
 
 /// What a run did.
@@ -390,7 +393,8 @@ pub fn run_with_shapes(
         // Seeded initial weights (the seed may be global to the backend).
         device.seed(cfg.train.seed);
         net.init(&device)
-    };
+    }
+    .with_kernels(opts.kernels);
     let csv_path = opts.out.join("metrics.csv");
     if ck.is_none() || !csv_path.is_file() {
         std::fs::write(&csv_path, csv_header() + "\n")?;

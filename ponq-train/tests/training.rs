@@ -109,6 +109,7 @@ fn smoke_training_loss_falls() {
         resume: false,
         device: backend::cpu(),
         quiet: true,
+        kernels: ponq_model::Kernels::default(),
     };
     let s = run_with_shapes(&cfg, &train, &val, &opts).expect("training runs");
     assert_eq!(s.epochs_done, 20);
@@ -160,6 +161,7 @@ fn resume_repeats_the_uninterrupted_run() {
             resume: false,
             device: dev.clone(),
             quiet: true,
+            kernels: ponq_model::Kernels::default(),
         },
     )
     .unwrap();
@@ -175,6 +177,7 @@ fn resume_repeats_the_uninterrupted_run() {
             resume: false,
             device: dev.clone(),
             quiet: true,
+            kernels: ponq_model::Kernels::default(),
         },
     )
     .unwrap();
@@ -188,6 +191,7 @@ fn resume_repeats_the_uninterrupted_run() {
             resume: true,
             device: dev,
             quiet: true,
+            kernels: ponq_model::Kernels::default(),
         },
     )
     .unwrap();
@@ -264,4 +268,55 @@ fn cli_trains_the_smoke_config_and_rejects_bad_input() {
         .unwrap();
     assert!(!o.status.success());
     std::fs::remove_dir_all(&out).ok();
+}
+
+/// The fast CPU kernels and Burn's stock layers train the same network the same way: from the
+/// same initial weights, the loss curves of a short run agree within float tolerance.
+#[test]
+fn fast_and_stock_kernels_give_the_same_loss_curve() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 4;
+    let (train, val) = shapes();
+    let dev = backend::cpu();
+    let init = tmp("kernels-init");
+    std::fs::create_dir_all(&init).unwrap();
+    let init_file = init.join("init.bpk");
+    let net = cfg.model.net();
+    ponq_model::weights::save(&net.init(&dev), &net, &init_file).unwrap();
+    cfg.train.init_from = Some(init_file);
+    let run = |kernels: ponq_model::Kernels| {
+        let out = tmp(&format!("kernels-{kernels}"));
+        let s = run_with_shapes(
+            &cfg,
+            &train,
+            &val,
+            &RunOptions {
+                out: out.clone(),
+                resume: false,
+                device: dev.clone(),
+                quiet: true,
+                kernels,
+            },
+        )
+        .unwrap();
+        std::fs::remove_dir_all(&out).ok();
+        s
+    };
+    let fast = run(ponq_model::Kernels::Fast);
+    let stock = run(ponq_model::Kernels::Stock);
+    assert_eq!(fast.step_losses.len(), stock.step_losses.len());
+    assert!(fast.step_losses.len() >= 8);
+    for (i, (x, y)) in fast.step_losses.iter().zip(&stock.step_losses).enumerate() {
+        assert!(
+            (x - y).abs() <= 1e-3 * y.abs(),
+            "step {i}: fast {x} vs stock {y}"
+        );
+    }
+    for ((_, a), (_, b)) in fast.validation.iter().zip(&stock.validation) {
+        assert!(
+            (a.total - b.total).abs() <= 1e-3 * b.total,
+            "{a:?} vs {b:?}"
+        );
+    }
+    std::fs::remove_dir_all(&init).ok();
 }

@@ -217,6 +217,10 @@ struct RunArgs {
     /// Network weights [default: the shipped model].
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Layer implementation of the network on the CPU: fast (custom kernels, default) or
+    /// stock (Burn's Conv3d layers); same numbers up to float rounding.
+    #[arg(long, default_value = "fast")]
+    kernels: ponq_model::Kernels,
     /// Surface and sharp-edge samples per mesh for the metrics.
     #[arg(long, default_value_t = 100_000)]
     samples: usize,
@@ -255,6 +259,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         Some(p) => ponq_model::weights::load(p, &device)?,
         None => ponq_infer::shipped::load(&device)?,
     };
+    let net = net.with_kernels(a.kernels);
     let (shapes, missing) = eval::inputs(&a.data, a.split.as_deref())?;
     if shapes.is_empty() {
         bail!("no shape of {} to evaluate", a.data.display());

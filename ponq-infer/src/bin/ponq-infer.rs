@@ -60,6 +60,10 @@ struct Args {
     /// Also write the predicted PoNQ (points, normals, quadrics, v*) as `.npz`.
     #[arg(long, value_name = "P.npz")]
     save_ponq: Option<PathBuf>,
+    /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
+    /// Conv3d layers). Same numbers up to float rounding; GPU backends use the stock layers.
+    #[arg(long, default_value = "fast")]
+    kernels: ponq_model::Kernels,
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
@@ -129,6 +133,7 @@ fn run(args: &Args) -> Result<Outcome> {
             (n, c, false)
         }
     };
+    let net = net.with_kernels(args.kernels);
     let opts = InferOptions {
         bounds,
         tile: args.tile,

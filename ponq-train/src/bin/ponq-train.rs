@@ -30,6 +30,11 @@ struct Args {
     /// Compute backend: flex (CPU, default) or wgpu (GPU; needs the `wgpu` cargo feature).
     #[arg(long, default_value = "flex")]
     backend: BackendKind,
+    /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
+    /// Conv3d layers). Same weights, same numbers up to float rounding; GPU backends always
+    /// use the stock layers.
+    #[arg(long, default_value = "fast")]
+    kernels: ponq_model::Kernels,
     /// Worker threads for the CPU backend and the data pipeline [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
@@ -84,6 +89,7 @@ fn real_main() -> Result<()> {
         resume: args.resume,
         device,
         quiet: args.quiet,
+        kernels: args.kernels,
     };
     let s = run(&cfg, &opts)?;
     if !args.quiet {

@@ -1,0 +1,52 @@
+//! How far the SDF grids of generated shapes are from their exact surface: for each node near
+//! the surface, |sdf| minus the distance to the nearest of 2,000,000 exact surface samples (a
+//! positive value is an error of at least that size), in cells of the grid.
+//! `cargo run --release -p ponq-data --example gt_consistency -- RES SEED...`
+use ponq_data::sdf::MeshSdf;
+use ponq_data::synth::{SynthOptions, generate};
+use ponq_mesh::nn::PointIndex;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let res: usize = args.first().map(|s| s.parse()).transpose()?.unwrap_or(64);
+    let seeds: Vec<u64> = args.iter().skip(1).map(|s| s.parse()).collect::<Result<_, _>>()?;
+    let seeds = if seeds.is_empty() { (1000..1012).collect() } else { seeds };
+    let cell = 2.0 / res as f64;
+    for seed in seeds {
+        let opts = SynthOptions { samples: 2_000_000, ..Default::default() };
+        let s = generate(seed, &opts)?;
+        let grid = MeshSdf::new(&s.mesh)?.grid(res, |_| {})?;
+        let index = PointIndex::new(&s.samples).expect("samples");
+        let mut worst: f64 = 0.0;
+        let mut worst_under: f64 = 0.0;
+        let mut n = 0;
+        let m = res + 1;
+        for i in 0..m {
+            for j in 0..m {
+                for k in 0..m {
+                    let v = f64::from(grid.get(i, j, k));
+                    if v.abs() > 2.0 * cell {
+                        continue;
+                    }
+                    let p = grid.node_position(i, j, k);
+                    let (_, d2) = index.nearest(&p);
+                    let d = d2.sqrt();
+                    worst = worst.max(v.abs() - d);
+                    worst_under = worst_under.max(d - v.abs());
+                    n += 1;
+                    // Sign against the exact inside test.
+                    if (v < 0.0) != s.inside(p) && v.abs() > 1e-9 {
+                        worst = worst.max(v.abs());
+                    }
+                }
+            }
+        }
+        println!(
+            "seed {seed}: {n} nodes within 2 cells; |sdf| - d_sample max {:.4} cells ({:.5}); d_sample - |sdf| max {:.4} cells",
+            worst / cell,
+            worst,
+            worst_under / cell
+        );
+    }
+    Ok(())
+}

@@ -9,17 +9,34 @@ use ponq_mesh::nn::PointIndex;
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let res: usize = args.first().map(|s| s.parse()).transpose()?.unwrap_or(64);
-    let seeds: Vec<u64> = args.iter().skip(1).map(|s| s.parse()).collect::<Result<_, _>>()?;
-    let seeds = if seeds.is_empty() { (1000..1012).collect() } else { seeds };
+    let seeds: Vec<u64> = args
+        .iter()
+        .skip(1)
+        .map(|s| s.parse())
+        .collect::<Result<_, _>>()?;
+    let seeds = if seeds.is_empty() {
+        (1000..1012).collect()
+    } else {
+        seeds
+    };
     let cell = 2.0 / res as f64;
     for seed in seeds {
-        let opts = SynthOptions { samples: 2_000_000, ..Default::default() };
+        let mesh_res: usize = std::env::var("MESH_RES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(96);
+        let opts = SynthOptions {
+            samples: 2_000_000,
+            mesh_resolution: mesh_res,
+            ..Default::default()
+        };
         let s = generate(seed, &opts)?;
         let grid = MeshSdf::new(&s.mesh)?.grid(res, |_| {})?;
         let index = PointIndex::new(&s.samples).expect("samples");
         let mut worst: f64 = 0.0;
         let mut worst_under: f64 = 0.0;
         let mut n = 0;
+        let mut at = ([0.0; 3], [0.0; 3], 0.0);
         let m = res + 1;
         for i in 0..m {
             for j in 0..m {
@@ -31,7 +48,10 @@ fn main() -> anyhow::Result<()> {
                     let p = grid.node_position(i, j, k);
                     let (_, d2) = index.nearest(&p);
                     let d = d2.sqrt();
-                    worst = worst.max(v.abs() - d);
+                    if v.abs() - d > worst {
+                        worst = v.abs() - d;
+                        at = (p, s.samples[index.nearest(&p).0 as usize], v);
+                    }
                     worst_under = worst_under.max(d - v.abs());
                     n += 1;
                     // Sign against the exact inside test.
@@ -46,6 +66,10 @@ fn main() -> anyhow::Result<()> {
             worst / cell,
             worst,
             worst_under / cell
+        );
+        println!(
+            "   worst at node {:?} (sdf {:.5}), nearest sample {:?}",
+            at.0, at.2, at.1
         );
     }
     Ok(())

@@ -67,6 +67,10 @@ pub struct DataSection {
     pub dir: PathBuf,
     /// Optional split file (one id per line) selecting the training shapes in `dir`.
     pub split: Option<PathBuf>,
+    /// Exclusion split: a file of ids (one per line) this run must never train or validate
+    /// on, e.g. the evaluation shapes; a run whose data holds one of them stops with an error
+    /// naming it. Relative to the config file.
+    pub exclude: Option<PathBuf>,
     /// When `dir` holds no shape: generate this many procedural shapes into it first.
     pub synth_count: usize,
     /// First seed of the generated shapes.
@@ -86,6 +90,7 @@ impl Default for DataSection {
         Self {
             dir: PathBuf::from("data/synth32"),
             split: None,
+            exclude: None,
             synth_count: 0,
             synth_seed: 1000,
             synth_samples: 200_000,
@@ -200,9 +205,21 @@ impl TrainConfig {
         let rel = |p: &Path| base.join(p); // `join` keeps absolute paths as they are
         c.data.dir = base.join(&c.data.dir);
         c.data.split = c.data.split.as_deref().map(rel);
+        c.data.exclude = c.data.exclude.as_deref().map(rel);
         c.train.init_from = c.train.init_from.as_deref().map(rel);
         c.check()?;
         Ok(c)
+    }
+
+    /// The ids of the exclusion split (`data.exclude`), empty without one.
+    pub fn excluded_ids(&self) -> Result<std::collections::HashSet<String>> {
+        match &self.data.exclude {
+            None => Ok(Default::default()),
+            Some(p) => Ok(ponq_data::dataset::read_split(p)
+                .with_context(|| format!("cannot read the exclusion split {}", p.display()))?
+                .into_iter()
+                .collect()),
+        }
     }
 
     /// Checks value ranges.

@@ -354,6 +354,20 @@ pub fn run_with_shapes(
             cfg.data.resolution
         );
     }
+    let excluded = cfg.excluded_ids()?;
+    if let Some(s) = train.iter().chain(val).find(|s| excluded.contains(&s.id)) {
+        bail!(
+            "the data holds shape {}, which the exclusion split {} says this run must never train \
+             or validate on; remove it from {} (or use data.split)",
+            s.id,
+            cfg.data
+                .exclude
+                .as_deref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default(),
+            cfg.data.dir.display()
+        );
+    }
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
     let device = opts.device.clone().autodiff();

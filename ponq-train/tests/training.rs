@@ -320,3 +320,41 @@ fn fast_and_stock_kernels_give_the_same_loss_curve() {
     }
     std::fs::remove_dir_all(&init).ok();
 }
+
+/// A run whose data holds an id of its exclusion split stops before training, naming it.
+#[test]
+fn excluded_shapes_stop_the_run() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 1;
+    let (train, val) = shapes();
+    let dir = tmp("exclude");
+    std::fs::create_dir_all(&dir).unwrap();
+    let opts = |out: &str| RunOptions {
+        out: dir.join(out),
+        resume: false,
+        device: backend::cpu(),
+        quiet: true,
+        kernels: ponq_model::Kernels::default(),
+    };
+    // Shape "c" (training) and then "v" (validation) are excluded.
+    for (list, id) in [("zz\nc\n", "c"), ("v\n", "v")] {
+        std::fs::write(dir.join("never.txt"), list).unwrap();
+        cfg.data.exclude = Some(dir.join("never.txt"));
+        let err = run_with_shapes(&cfg, &train, &val, &opts("run"))
+            .expect_err("an excluded shape stops the run")
+            .to_string();
+        assert!(err.contains(&format!("shape {id},")), "{err}");
+        assert!(!dir.join("run/metrics.csv").exists(), "nothing was trained");
+    }
+    // Ids that are not in the data do not matter.
+    std::fs::write(dir.join("never.txt"), "Advanced_GEB\nother\n").unwrap();
+    let s = run_with_shapes(&cfg, &train, &val, &opts("ok")).expect("runs");
+    assert_eq!(s.epochs_done, 1);
+    // The shipped recipe excludes the 105 shared evaluation meshes.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cpu = TrainConfig::load(&root.join("configs/cpu.toml")).unwrap();
+    let ids = cpu.excluded_ids().unwrap();
+    assert_eq!(ids.len(), 105);
+    assert!(ids.contains("Advanced_GEB"));
+    std::fs::remove_dir_all(&dir).ok();
+}

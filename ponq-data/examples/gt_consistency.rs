@@ -31,7 +31,14 @@ fn main() -> anyhow::Result<()> {
             ..Default::default()
         };
         let s = generate(seed, &opts)?;
+        let exact = std::env::var("EXACT").is_ok();
         let grid = MeshSdf::new(&s.mesh)?.grid(res, |_| {})?;
+        let t = std::time::Instant::now();
+        let ed = ponq_data::synth::distance::ExactDistance::new(&s.solid, &s.mesh, 1_000_000, seed)
+            .expect("samples");
+        eprintln!("samples: {:.2} s", t.elapsed().as_secs_f64());
+        let exact_grid = ed.grid(res);
+        eprintln!("exact grid: {:.2} s", t.elapsed().as_secs_f64());
         let index = PointIndex::new(&s.samples).expect("samples");
         let mut worst: f64 = 0.0;
         let mut worst_under: f64 = 0.0;
@@ -41,8 +48,16 @@ fn main() -> anyhow::Result<()> {
         for i in 0..m {
             for j in 0..m {
                 for k in 0..m {
-                    let v = f64::from(grid.get(i, j, k));
-                    if v.abs() > 2.0 * cell {
+                    let v = if exact {
+                        f64::from(exact_grid[grid.index(i, j, k)])
+                    } else {
+                        f64::from(grid.get(i, j, k))
+                    };
+                    let band: f64 = std::env::var("BAND")
+                        .ok()
+                        .and_then(|b| b.parse().ok())
+                        .unwrap_or(2.0);
+                    if v.abs() > band * cell {
                         continue;
                     }
                     let p = grid.node_position(i, j, k);

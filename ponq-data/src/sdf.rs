@@ -167,6 +167,68 @@ pub fn point_triangle_distance_sq(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
     Tri::new(t).dist2(p)
 }
 
+/// The point of the closed triangle `(a, b, c)` closest to `p` (Ericson, "Real-Time Collision
+/// Detection" 5.1.5, by Voronoi regions of the vertices, edges and face).
+pub fn closest_point_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    let ab = sub(b, a);
+    let ac = sub(c, a);
+    let ap = sub(p, a);
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = sub(p, b);
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let at = |u: [f64; 3], t: f64| -> [f64; 3] { std::array::from_fn(|k| a[k] + t * u[k]) };
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return at(ab, d1 / (d1 - d3));
+    }
+    let cp = sub(p, c);
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return at(ac, d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return std::array::from_fn(|k| b[k] + w * (c[k] - b[k]));
+    }
+    let denom = va + vb + vc;
+    if !(denom.abs() > 0.0) {
+        // Degenerate triangle: the nearest of its three edges' points.
+        let seg = |u: [f64; 3], v: [f64; 3]| {
+            let e = sub(v, u);
+            let l = dot(e, e);
+            let t = if l > 0.0 {
+                (dot(sub(p, u), e) / l).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q: [f64; 3] = std::array::from_fn(|k| u[k] + t * e[k]);
+            (dot(sub(p, q), sub(p, q)), q)
+        };
+        let cands = [seg(a, b), seg(b, c), seg(c, a)];
+        return cands
+            .iter()
+            .min_by(|x, y| x.0.total_cmp(&y.0))
+            .map_or(a, |x| x.1);
+    }
+    let v = vb / denom;
+    let w = vc / denom;
+    std::array::from_fn(|k| a[k] + ab[k] * v + ac[k] * w)
+}
+
 /// Signed solid angle of triangle `(a, b, c)` seen from `p` (Van Oosterom and Strackee),
 /// positive when `p` is on the side the normal `(b-a) x (c-a)` points away from, in
 /// `[-2 pi, 2 pi]`.
@@ -283,6 +345,18 @@ impl MeshSdf {
     /// Exact unsigned distance from `p` to the mesh.
     pub fn distance(&self, p: [f64; 3]) -> f64 {
         self.nearest(p, None, &mut [(0, 0.0); STACK]).0.sqrt()
+    }
+
+    /// The point of the mesh closest to `p` (exact, up to rounding).
+    pub fn closest_point(&self, p: [f64; 3]) -> [f64; 3] {
+        let (_, t) = self.nearest(p, None, &mut [(0, 0.0); STACK]);
+        let f = self.faces[t as usize];
+        closest_point_on_triangle(
+            p,
+            self.verts[f[0] as usize],
+            self.verts[f[1] as usize],
+            self.verts[f[2] as usize],
+        )
     }
 
     /// Generalised winding number at `p` (exact up to rounding; `1` inside and `0` outside a

@@ -31,6 +31,24 @@ impl PointIndex {
         (r.item, r.distance)
     }
 
+    /// `(index, squared distance)` of the `k` points nearest to `q` (all of them when there
+    /// are fewer), nearest first.
+    pub fn nearest_k(&self, q: &[f64; 3], k: usize) -> Vec<(u32, f64)> {
+        let Some(k) = std::num::NonZeroUsize::new(k) else {
+            return Vec::new();
+        };
+        let mut v: Vec<(u32, f64)> = self
+            .tree
+            .query(q)
+            .nearest_n::<SquaredEuclidean<f64>>(k)
+            .execute()
+            .into_iter()
+            .map(|r| (r.item, r.distance))
+            .collect();
+        v.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        v
+    }
+
     /// Nearest points of many queries, in parallel: `(index, squared distance)` per query.
     pub fn nearest_many(&self, queries: &[[f64; 3]]) -> Vec<(u32, f64)> {
         use rayon::prelude::*;
@@ -54,6 +72,18 @@ mod tests {
         for j in 0..100 {
             let q = [(j as f64 * 0.11).cos(), (j as f64 * 0.23).sin(), 0.3];
             let (i, d) = idx.nearest(&q);
+            let k = idx.nearest_k(&q, 5);
+            assert_eq!(k.len(), 5);
+            assert_eq!(k[0].1, d);
+            assert!(k.windows(2).all(|w| w[0].1 <= w[1].1));
+            let mut all: Vec<f64> = pts
+                .iter()
+                .map(|p| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                .collect();
+            all.sort_by(f64::total_cmp);
+            for (j, (_, dk)) in k.iter().enumerate() {
+                assert!((dk - all[j]).abs() < 1e-12);
+            }
             let best = pts
                 .iter()
                 .map(|p| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))

@@ -42,11 +42,25 @@ pub struct Solid {
     labels: Vec<String>,
 }
 
+/// The smooth surface piece a boundary sample lies on: surface part `part` of primitive
+/// `prim` (and, for a slot's round ends, which end), see [`Primitive::patch`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Patch {
+    /// Primitive index in the solid.
+    pub prim: u32,
+    /// Surface part of the primitive.
+    pub part: u8,
+    /// Round end of a slot (sign of the local `x`); 1 otherwise.
+    pub side: i8,
+}
+
 /// Oriented boundary samples of a [`Solid`] and how many primitive samples were drawn.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct BoundarySamples {
     pub points: Vec<V3>,
     pub normals: Vec<V3>,
+    /// The surface piece of each sample.
+    pub patches: Vec<Patch>,
     /// Primitive samples drawn (accepted or not).
     pub drawn: u64,
 }
@@ -157,16 +171,44 @@ impl Solid {
 
     /// One draw: a primitive picked by area, a uniform point on it, kept when it lies on the
     /// boundary of the solid (with the solid's outward normal).
-    pub(crate) fn draw(&self, weights: &[f64], rng: &mut impl Rng) -> Option<(V3, V3)> {
+    pub(crate) fn draw(&self, weights: &[f64], rng: &mut impl Rng) -> Option<(V3, V3, Patch)> {
         let i = pick(weights, rng.random::<f64>());
-        let (p, n) = self.prims[i].sample(rng);
+        let (p, n, part, side) = self.prims[i].sample_tagged(rng);
+        let side = if matches!(self.prims[i].kind(), super::primitive::Kind::Slot { .. }) {
+            side
+        } else {
+            1
+        };
+        let patch = Patch {
+            prim: i as u32,
+            part,
+            side,
+        };
         let inner = self.inside(sub(p, scale(n, PROBE)));
         let outer = self.inside(add(p, scale(n, PROBE)));
         match (inner, outer) {
-            (true, false) => Some((p, n)),
-            (false, true) => Some((p, n.map(|x| -x))),
+            (true, false) => Some((p, n, patch)),
+            (false, true) => Some((p, n.map(|x| -x), patch)),
             _ => None,
         }
+    }
+
+    /// The singular points of `patch` (a pointed cone's apex) with the cone's axis.
+    pub(crate) fn patch_apexes(&self, patch: Patch) -> Vec<(V3, V3)> {
+        self.prims[patch.prim as usize].apexes(patch.part)
+    }
+
+    /// Whether the surface of `patch` is a plane.
+    pub(crate) fn patch_is_planar(&self, patch: Patch) -> bool {
+        self.prims[patch.prim as usize]
+            .kind()
+            .part_is_planar(patch.part as usize)
+    }
+
+    /// `(g, grad g)` of the smooth surface of `patch` at `p` (distance-like, see
+    /// [`Primitive::patch`]).
+    pub(crate) fn patch(&self, patch: Patch, p: V3) -> (f64, V3) {
+        self.prims[patch.prim as usize].patch(patch.part, patch.side, p)
     }
 
     /// `n` area-uniform boundary samples, reproducible from `key` whatever the thread count
@@ -192,6 +234,7 @@ impl Solid {
                 let mut out = BoundarySamples {
                     points: Vec::with_capacity(quota),
                     normals: Vec::with_capacity(quota),
+                    patches: Vec::with_capacity(quota),
                     drawn: 0,
                 };
                 let limit = max_draws_per_sample * quota as u64 + 1000;
@@ -200,9 +243,10 @@ impl Solid {
                         return None;
                     }
                     out.drawn += 1;
-                    if let Some((p, nn)) = self.draw(&weights, &mut rng) {
+                    if let Some((p, nn, patch)) = self.draw(&weights, &mut rng) {
                         out.points.push(p);
                         out.normals.push(nn);
+                        out.patches.push(patch);
                     }
                 }
                 Some(out)
@@ -211,12 +255,14 @@ impl Solid {
         let mut all = BoundarySamples {
             points: Vec::with_capacity(n),
             normals: Vec::with_capacity(n),
+            patches: Vec::with_capacity(n),
             drawn: 0,
         };
         for p in parts {
             let p = p?;
             all.points.extend(p.points);
             all.normals.extend(p.normals);
+            all.patches.extend(p.patches);
             all.drawn += p.drawn;
         }
         Some(all)

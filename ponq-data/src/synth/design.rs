@@ -118,8 +118,8 @@ impl Builder {
             if out.len() == n {
                 break;
             }
-            if let Some(x) = s.draw(&w, rng) {
-                out.push(x);
+            if let Some((p, n, _)) = s.draw(&w, rng) {
+                out.push((p, n));
             }
         }
         out

@@ -42,6 +42,7 @@
 
 pub mod csg;
 pub mod design;
+pub mod distance;
 pub mod geom;
 pub mod primitive;
 
@@ -56,7 +57,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-pub use csg::{Csg, Solid};
+pub use csg::{Csg, Patch, Solid};
 pub use geom::{Frame, V3};
 pub use primitive::{Kind, Primitive};
 

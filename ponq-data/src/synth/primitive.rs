@@ -464,6 +464,153 @@ impl Kind {
     }
 }
 
+impl Kind {
+    /// The singular points of surface part `part` (the apex of a pointed cone), local frame,
+    /// with the axis direction.
+    pub(crate) fn part_apexes(&self, part: usize) -> Vec<(V3, V3)> {
+        match self {
+            Kind::Cone {
+                r_bottom,
+                r_top,
+                half_height,
+            } if part == 0 => {
+                let mut v = Vec::new();
+                if *r_bottom == 0.0 {
+                    v.push(([0.0, 0.0, -half_height], [0.0, 0.0, 1.0]));
+                }
+                if *r_top == 0.0 {
+                    v.push(([0.0, 0.0, *half_height], [0.0, 0.0, 1.0]));
+                }
+                v
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// Whether surface part `part` lies on a plane (faces and caps).
+    pub(crate) fn part_is_planar(&self, part: usize) -> bool {
+        match self {
+            Kind::Box { .. } | Kind::Prism { .. } => true,
+            Kind::Cylinder { .. } | Kind::Cone { .. } => part > 0,
+            Kind::Sphere { .. } | Kind::Torus { .. } => false,
+            Kind::Slot { .. } => part < 4,
+        }
+    }
+
+    /// The smooth surface that carries surface part `part` ([`Kind::sample_part`]'s numbering;
+    /// `side` picks the round end of a slot's part 4 by the sign of `x`), as a distance-like
+    /// function of a local point: `(g, grad g)` with `g = 0` on the surface, `g > 0` on its
+    /// outer side and `|grad g| = 1` (exact distance to the whole plane, sphere, cylinder,
+    /// torus or the cone's slanted line; planes for faces and caps).
+    pub(crate) fn patch(&self, part: usize, side: i8, q: V3) -> (f64, V3) {
+        let [x, y, z] = q;
+        let plane = |n: V3, c: f64| (n[0] * x + n[1] * y + n[2] * z - c, n);
+        let cap = |sign: f64, h: f64| plane([0.0, 0.0, sign], h);
+        let radial = |cx: f64, r: f64| {
+            let (dx, dy) = (x - cx, y);
+            let rho = dx.hypot(dy);
+            if rho > 1e-300 {
+                (rho - r, [dx / rho, dy / rho, 0.0])
+            } else {
+                (-r, [1.0, 0.0, 0.0])
+            }
+        };
+        match self {
+            Kind::Box { half } => {
+                let (a, sign) = (part / 2, if part % 2 == 0 { 1.0 } else { -1.0 });
+                let mut n = [0.0; 3];
+                n[a] = sign;
+                plane(n, half[a])
+            }
+            Kind::Cylinder {
+                radius,
+                half_height,
+            } => match part {
+                0 => radial(0.0, *radius),
+                1 => cap(1.0, *half_height),
+                _ => cap(-1.0, *half_height),
+            },
+            Kind::Cone {
+                r_bottom: r0,
+                r_top: r1,
+                half_height: h,
+            } => match part {
+                0 => {
+                    // Distance to the line through (r0, -h) and (r1, h) in the (rho, z)
+                    // half-plane, positive away from the axis.
+                    let sl = ((r1 - r0).powi(2) + 4.0 * h * h).sqrt();
+                    let rho = x.hypot(y);
+                    let (cx, cy) = if rho > 1e-300 {
+                        (x / rho, y / rho)
+                    } else {
+                        (1.0, 0.0)
+                    };
+                    let g = ((rho - r0) * 2.0 * h - (z + h) * (r1 - r0)) / sl;
+                    (g, [2.0 * h * cx / sl, 2.0 * h * cy / sl, -(r1 - r0) / sl])
+                }
+                1 => cap(1.0, *h),
+                _ => cap(-1.0, *h),
+            },
+            Kind::Sphere { radius } => {
+                let l = (x * x + y * y + z * z).sqrt();
+                if l > 1e-300 {
+                    (l - radius, [x / l, y / l, z / l])
+                } else {
+                    (-radius, [0.0, 0.0, 1.0])
+                }
+            }
+            Kind::Torus { major, minor } => {
+                let rho = x.hypot(y);
+                let (cx, cy) = if rho > 1e-300 {
+                    (x / rho, y / rho)
+                } else {
+                    (1.0, 0.0)
+                };
+                let (a, b) = (rho - major, z);
+                let t = a.hypot(b);
+                if t > 1e-300 {
+                    (t - minor, [a / t * cx, a / t * cy, b / t])
+                } else {
+                    (-minor, [cx, cy, 0.0])
+                }
+            }
+            Kind::Prism {
+                polygon,
+                half_height,
+            } => match part {
+                0 => cap(1.0, *half_height),
+                1 => cap(-1.0, *half_height),
+                k => {
+                    let n = polygon.len();
+                    let (a, b) = (polygon[(k - 2) % n], polygon[(k - 1) % n]);
+                    let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+                    let l = ex.hypot(ey);
+                    let nn = [ey / l, -ex / l, 0.0];
+                    plane(nn, nn[0] * a[0] + nn[1] * a[1])
+                }
+            },
+            Kind::Slot {
+                half_length,
+                radius,
+                half_height,
+            } => match part {
+                0 => cap(1.0, *half_height),
+                1 => cap(-1.0, *half_height),
+                2 => plane([0.0, 1.0, 0.0], *radius),
+                3 => plane([0.0, -1.0, 0.0], *radius),
+                _ => radial(
+                    if side >= 0 {
+                        *half_length
+                    } else {
+                        -half_length
+                    },
+                    *radius,
+                ),
+            },
+        }
+    }
+}
+
 /// Radius of a cone frustum at height `z`.
 fn cone_radius(r0: f64, r1: f64, h: f64, z: f64) -> f64 {
     (r0 + (r1 - r0) * (z + h) / (2.0 * h)).max(0.0)
@@ -654,6 +801,39 @@ impl Primitive {
         let part = pick(&self.parts, rng.random::<f64>());
         let (q, n) = self.kind.sample_part(part, &self.clip, rng);
         (self.frame.world_point(q), self.frame.world_dir(n))
+    }
+
+    /// Like [`Primitive::sample`], with the surface part the sample lies on and, for the round
+    /// ends of a slot, which end (the sign of the local `x`): the arguments of
+    /// [`Primitive::patch`].
+    pub(crate) fn sample_tagged(&self, rng: &mut impl Rng) -> (V3, V3, u8, i8) {
+        let part = pick(&self.parts, rng.random::<f64>());
+        let (q, n) = self.kind.sample_part(part, &self.clip, rng);
+        let side = if q[0] >= 0.0 { 1 } else { -1 };
+        (
+            self.frame.world_point(q),
+            self.frame.world_dir(n),
+            part as u8,
+            side,
+        )
+    }
+
+    /// The singular points of a part (a pointed cone's apex) with the axis, world frame.
+    pub(crate) fn apexes(&self, part: u8) -> Vec<(V3, V3)> {
+        self.kind
+            .part_apexes(part as usize)
+            .into_iter()
+            .map(|(q, a)| (self.frame.world_point(q), self.frame.world_dir(a)))
+            .collect()
+    }
+
+    /// The smooth surface carrying a part of this primitive at a world point: `(g, grad g)`
+    /// in world coordinates (see [`Kind::patch`]; the frame is rigid, so distances agree).
+    pub(crate) fn patch(&self, part: u8, side: i8, p: V3) -> (f64, V3) {
+        let (g, n) = self
+            .kind
+            .patch(part as usize, side, self.frame.local_point(p));
+        (g, self.frame.world_dir(n))
     }
 
     /// The primitive under the similarity `p -> (p - centre) * s` (`s > 0`).

@@ -25,12 +25,28 @@ fn main() -> anyhow::Result<()> {
             .ok()
             .and_then(|v| v.parse().ok())
             .unwrap_or(96);
+        let mut mix = ponq_data::synth::SynthMix::default();
+        match std::env::var("FAMILY").as_deref() {
+            Ok("filleted") => (mix.csg, mix.filleted) = (0.0, 1.0),
+            Ok("lathe") => (mix.csg, mix.lathe) = (0.0, 1.0),
+            Ok("freeform") => (mix.csg, mix.freeform) = (0.0, 1.0),
+            _ => {}
+        }
         let opts = SynthOptions {
             samples: 2_000_000,
             mesh_resolution: mesh_res,
+            mix,
             ..Default::default()
         };
+        let t0 = std::time::Instant::now();
         let s = generate(seed, &opts)?;
+        eprintln!(
+            "{:?} in {} attempts, {:.2} s: {}",
+            s.family,
+            s.attempts,
+            t0.elapsed().as_secs_f64(),
+            s.primitive_kinds().join(" ")
+        );
         let exact = std::env::var("EXACT").is_ok();
         let grid = MeshSdf::new(&s.mesh)?.grid(res, |_| {})?;
         let t = std::time::Instant::now();

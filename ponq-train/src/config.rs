@@ -73,12 +73,22 @@ pub struct DataSection {
     pub exclude: Option<PathBuf>,
     /// When `dir` holds no shape: generate this many procedural shapes into it first.
     pub synth_count: usize,
+    /// Relative frequencies of the generated shape families (see `ponq_data::synth::SynthMix`):
+    /// `synth_mix = { csg = 0.4, filleted = 0.25, lathe = 0.15, freeform = 0.2 }`; CSG parts
+    /// only by default.
+    pub synth_mix: SynthMixSection,
     /// First seed of the generated shapes.
     pub synth_seed: u64,
     /// Surface samples stored per generated shape.
     pub synth_samples: usize,
-    /// Grid resolution (cells per side) trained on.
+    /// Grid resolution (cells per side) trained and validated on.
     pub resolution: usize,
+    /// More resolutions trained on (the records must hold these grids; generated shapes get
+    /// them): a batch is cut from one of them with probability `extra_weight`, so the
+    /// network sees the cell sizes it is used at.
+    pub extra_resolutions: Vec<usize>,
+    /// Share of batches cut from the `extra_resolutions` grids (0.5).
+    pub extra_weight: f64,
     /// Shapes held aside for validation (the last ones in sorted order).
     pub validation_shapes: usize,
     /// Use at most this many training shapes (0: all).
@@ -92,11 +102,52 @@ impl Default for DataSection {
             split: None,
             exclude: None,
             synth_count: 0,
+            synth_mix: SynthMixSection::default(),
             synth_seed: 1000,
             synth_samples: 200_000,
             resolution: 32,
+            extra_resolutions: Vec::new(),
+            extra_weight: 0.5,
             validation_shapes: 16,
             max_shapes: 0,
+        }
+    }
+}
+
+/// `data.synth_mix`: relative frequencies of the generated shape families.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SynthMixSection {
+    /// Sharp-edged CSG parts.
+    pub csg: f64,
+    /// CSG features on filleted bases.
+    pub filleted: f64,
+    /// Turned parts.
+    pub lathe: f64,
+    /// Free-form bodies.
+    pub freeform: f64,
+}
+
+impl Default for SynthMixSection {
+    fn default() -> Self {
+        let m = ponq_data::synth::SynthMix::default();
+        Self {
+            csg: m.csg,
+            filleted: m.filleted,
+            lathe: m.lathe,
+            freeform: m.freeform,
+        }
+    }
+}
+
+impl SynthMixSection {
+    /// The generator's form.
+    pub fn mix(&self) -> ponq_data::synth::SynthMix {
+        ponq_data::synth::SynthMix {
+            csg: self.csg,
+            filleted: self.filleted,
+            lathe: self.lathe,
+            freeform: self.freeform,
         }
     }
 }
@@ -239,6 +290,28 @@ impl TrainConfig {
                 "train.crop ({}) exceeds data.resolution ({})",
                 t.crop,
                 self.data.resolution
+            );
+        }
+        if let Some(&r) = self
+            .data
+            .extra_resolutions
+            .iter()
+            .find(|&&r| r < 2 || r < t.crop)
+        {
+            bail!(
+                "data.extra_resolutions: {r} is below 2 or below train.crop ({})",
+                t.crop
+            );
+        }
+        self.data
+            .synth_mix
+            .mix()
+            .check()
+            .map_err(|e| anyhow::anyhow!("data.synth_mix: {e}"))?;
+        if !(0.0..=1.0).contains(&self.data.extra_weight) {
+            bail!(
+                "data.extra_weight must be in [0, 1], got {}",
+                self.data.extra_weight
             );
         }
         let m = &self.model;

@@ -31,9 +31,23 @@ pub struct Shape {
     pub samples: Vec<[f32; 3]>,
     /// Their unit normals.
     pub normals: Vec<[f32; 3]>,
+    /// Grids of the same shape at other resolutions (`data.extra_resolutions`), each
+    /// `(res, (res+1)^3 values)`.
+    pub extra: Vec<(usize, Vec<f32>)>,
 }
 
 impl Shape {
+    /// The grid at resolution `res`: the main one or an extra one.
+    pub fn grid(&self, res: usize) -> Option<&[f32]> {
+        if res == self.res {
+            return Some(&self.sdf);
+        }
+        self.extra
+            .iter()
+            .find(|g| g.0 == res)
+            .map(|g| g.1.as_slice())
+    }
+
     /// Takes the grid at `res` and at most `max_samples` samples (a deterministic subset) of
     /// a record.
     pub fn from_record(
@@ -68,6 +82,7 @@ impl Shape {
             sdf: sdf.clone(),
             samples,
             normals,
+            extra: Vec::new(),
         })
     }
 }
@@ -97,6 +112,38 @@ pub fn shape_files(dir: &Path, split: Option<&Path>) -> Result<Vec<PathBuf>> {
         });
     }
     Ok(files)
+}
+
+/// Reads one shape file: its grid at `res`, those at the resolutions `extra`, and at most
+/// `max_samples` samples.
+pub fn read_shape_with(
+    path: &Path,
+    res: usize,
+    extra: &[usize],
+    max_samples: usize,
+) -> Result<Shape> {
+    let id = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let rec = match path.extension().and_then(|e| e.to_str()) {
+        Some("hdf5" | "h5") => ponq_data::hdf5::read_authors_h5(path),
+        _ => ShapeRecord::read(path),
+    }
+    .with_context(|| format!("cannot read shape {}", path.display()))?;
+    let mut grids = Vec::new();
+    for &r in extra.iter().filter(|&&r| r != res) {
+        let Some(g) = rec.sdf.get(&r) else {
+            bail!(
+                "shape {id} has no SDF grid at resolution {r} (it has {:?}); prepare it with `ponq-prep ... --res {r}`",
+                rec.sdf.keys().collect::<Vec<_>>()
+            );
+        };
+        grids.push((r, g.clone()));
+    }
+    let mut shape = Shape::from_record(id, rec, res, max_samples)?;
+    shape.extra = grids;
+    Ok(shape)
 }
 
 /// Reads one shape file.
@@ -196,7 +243,18 @@ pub fn item_frame(res: usize) -> GridFrame {
 
 /// Cuts a random crop of `shape` (retrying until it holds surface, at most 32 times).
 pub fn make_item(shape: &Shape, opts: &ItemOptions, rng: &mut impl Rng) -> Item {
-    let n = shape.res;
+    make_item_at(shape, shape.res, &shape.sdf, opts, rng)
+}
+
+/// [`make_item`] from the grid `sdf` of `shape` at resolution `res` (see [`Shape::grid`]).
+pub fn make_item_at(
+    shape: &Shape,
+    res: usize,
+    sdf: &[f32],
+    opts: &ItemOptions,
+    rng: &mut impl Rng,
+) -> Item {
+    let n = res;
     let c = if opts.crop == 0 || opts.crop >= n {
         n
     } else {
@@ -257,7 +315,7 @@ pub fn make_item(shape: &Shape, opts: &ItemOptions, rng: &mut impl Rng) -> Item 
         for j in 0..m {
             for k in 0..m {
                 let s = map.source_node([start[0] + i, start[1] + j, start[2] + k], n);
-                raw.push(shape.sdf[(s[0] * (n + 1) + s[1]) * (n + 1) + s[2]]);
+                raw.push(sdf[(s[0] * (n + 1) + s[1]) * (n + 1) + s[2]]);
             }
         }
     }
@@ -342,6 +400,7 @@ pub fn sphere_shape(id: &str, res: usize, centre: [f32; 3], radius: f32, samples
         pts.push(std::array::from_fn(|a| centre[a] + radius * n[a]));
     }
     Shape {
+        extra: Vec::new(),
         id: id.to_string(),
         res,
         sdf,

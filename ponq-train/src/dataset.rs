@@ -6,7 +6,7 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 
 use crate::config::TrainConfig;
-use crate::data::{Shape, read_shape, shape_files};
+use crate::data::{Shape, read_shape_with, shape_files};
 
 /// Samples kept in memory per shape (crops draw their loss samples from these).
 pub const MAX_SAMPLES_IN_MEMORY: usize = 200_000;
@@ -17,11 +17,16 @@ pub fn generate(cfg: &TrainConfig, quiet: bool) -> Result<()> {
     let jobs: Vec<ponq_data::prep::SynthJob> = (0..d.synth_count as u64)
         .map(|i| ponq_data::prep::SynthJob {
             seed: d.synth_seed + i,
-            synth: ponq_data::synth::SynthOptions::default(),
+            synth: ponq_data::synth::SynthOptions {
+                mix: d.synth_mix.mix(),
+                ..Default::default()
+            },
         })
         .collect();
+    let mut resolutions = vec![d.resolution];
+    resolutions.extend(d.extra_resolutions.iter().filter(|&&r| r != d.resolution));
     let opts = ponq_data::prep::PrepOptions {
-        resolutions: vec![d.resolution],
+        resolutions,
         samples: d.synth_samples,
         ..Default::default()
     };
@@ -87,7 +92,8 @@ pub fn load(cfg: &TrainConfig, quiet: bool) -> Result<(Vec<Shape>, Vec<Shape>)> 
     let read = |v: &[std::path::PathBuf]| -> Result<Vec<Shape>> {
         v.par_iter()
             .map(|p| {
-                let s = read_shape(p, d.resolution, MAX_SAMPLES_IN_MEMORY);
+                let s =
+                    read_shape_with(p, d.resolution, &d.extra_resolutions, MAX_SAMPLES_IN_MEMORY);
                 pb.inc(1);
                 s
             })

@@ -16,13 +16,13 @@ use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_model::{PonqNet, Prediction};
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::config::TrainConfig;
-use crate::data::{Batcher, Item, ItemOptions, Shape, item_frame, make_item};
+use crate::data::{Batcher, Item, ItemOptions, Shape, item_frame, make_item, make_item_at};
 use crate::loss::{self, LossTerms};
 
 /// How to run.
@@ -441,11 +441,29 @@ pub fn run_with_shapes(
         order.shuffle(&mut rng);
         let mut mean = LossTerms::default();
         for chunk in order.chunks(cfg.train.batch_size) {
+            // The resolution of this batch (no draw without extra resolutions).
+            let extra = &cfg.data.extra_resolutions;
+            let res = if !extra.is_empty() && rng.random_bool(cfg.data.extra_weight) {
+                extra[rng.random_range(0..extra.len())]
+            } else {
+                cfg.data.resolution
+            };
             let items: Vec<Item> = chunk
                 .iter()
-                .map(|&i| make_item(&train[i], &item_opts, &mut rng))
-                .collect();
-            let out = model.forward(batcher.batch(&items)?, &frame);
+                .map(|&i| {
+                    let shape = &train[i];
+                    let grid = shape.grid(res).with_context(|| {
+                        format!("shape {} has no grid at resolution {res}", shape.id)
+                    })?;
+                    Ok(make_item_at(shape, res, grid, &item_opts, &mut rng))
+                })
+                .collect::<Result<_>>()?;
+            let batch_frame = if res == cfg.data.resolution {
+                frame
+            } else {
+                item_frame(res)
+            };
+            let out = model.forward(batcher.batch(&items)?, &batch_frame);
             let l = loss::compute(&out, &items, &cfg.loss)?;
             let mut grads = GradientsParams::from_grads(l.total.backward(), &model);
             clip_global_norm(&model, &mut grads, cfg.train.grad_clip);

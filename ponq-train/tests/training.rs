@@ -358,3 +358,41 @@ fn excluded_shapes_stop_the_run() {
     assert!(ids.contains("Advanced_GEB"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Batches cut from extra resolutions: a run with `data.extra_resolutions` trains on the
+/// extra grids of the shapes (and stops with a clear error naming a shape without one).
+#[test]
+fn extra_resolutions_are_trained_on() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 3;
+    cfg.data.extra_resolutions = vec![16];
+    cfg.data.extra_weight = 1.0;
+    let (train, val) = shapes();
+    let dir = tmp("extra-res");
+    std::fs::create_dir_all(&dir).unwrap();
+    let opts = RunOptions {
+        out: dir.join("run"),
+        resume: false,
+        device: backend::cpu(),
+        quiet: true,
+        kernels: ponq_model::Kernels::default(),
+    };
+    let err = run_with_shapes(&cfg, &train, &val, &opts)
+        .expect_err("no shape has a 16^3 grid")
+        .to_string();
+    assert!(err.contains("has no grid at resolution 16"), "{err}");
+    // Give every training shape its 16-cell grid: the run trains on it.
+    let with_extra: Vec<_> = train
+        .iter()
+        .map(|s| {
+            let fine = sphere_shape("x", 16, [0.0; 3], 0.5, 10);
+            let mut s = s.clone();
+            s.extra = vec![(16, fine.sdf)];
+            s
+        })
+        .collect();
+    let s = run_with_shapes(&cfg, &with_extra, &val, &opts).expect("trains");
+    assert_eq!(s.epochs_done, 3);
+    assert!(s.step_losses.iter().all(|l| l.is_finite()));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -198,6 +198,13 @@ impl Solid {
         self.prims[patch.prim as usize].apexes(patch.part)
     }
 
+    /// Whether the function of `patch` is the distance to its whole surface.
+    pub(crate) fn patch_is_distance(&self, patch: Patch) -> bool {
+        self.prims[patch.prim as usize]
+            .kind()
+            .part_is_distance(patch.part as usize)
+    }
+
     /// Whether the surface of `patch` is a plane.
     pub(crate) fn patch_is_planar(&self, patch: Patch) -> bool {
         self.prims[patch.prim as usize]

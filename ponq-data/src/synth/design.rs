@@ -292,7 +292,7 @@ impl Builder {
                 standing(hh),
             )
         } else if r < 0.82 {
-            let radius = rng.random_range(0.06..0.3);
+            let radius: f64 = rng.random_range(0.06..0.3);
             let c = sub(p, scale(n, radius * rng.random_range(0.1..0.7)));
             self.label = "dome";
             self.push(Kind::Sphere { radius }, Frame::new(IDENTITY, c))
@@ -643,4 +643,299 @@ pub(crate) fn design(rng: &mut ChaCha8Rng, max_primitives: usize) -> Solid {
         _ => random_rotation(rng),
     };
     b.current().rotated(&rot)
+}
+
+/// Families of generated shapes (see [`super::SynthMix`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// CSG parts of sharp-edged primitives ([`design`]).
+    Csg,
+    /// The same features on a base whose edges are rounded by fillets (a rounded box or a
+    /// rounded cylinder), with rounded bosses.
+    Filleted,
+    /// Turned parts: a stack of coaxial cylinders, cones and rounded cylinders, with grooves
+    /// (subtracted tori), an axial bore and cross holes.
+    Lathe,
+    /// Free-form bodies without edges: an ellipsoid, alone or with a smooth rounded box, a bore
+    /// or a second ellipsoid.
+    Freeform,
+}
+
+impl Family {
+    /// Name in descriptions.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Csg => "csg",
+            Family::Filleted => "filleted",
+            Family::Lathe => "lathe",
+            Family::Freeform => "freeform",
+        }
+    }
+}
+
+fn new_builder(max: usize) -> Builder {
+    Builder {
+        prims: Vec::new(),
+        tree: Csg::Union(Vec::new()),
+        max: max.max(1),
+        rounded: false,
+        label: "",
+        labels: Vec::new(),
+    }
+}
+
+fn final_rotation(rng: &mut ChaCha8Rng) -> super::geom::M3 {
+    match rng.random_range(0..3) {
+        0 => IDENTITY,
+        1 => random_axis_rotation(rng),
+        _ => random_rotation(rng),
+    }
+}
+
+/// A design of `family` with at most `max_primitives` primitives.
+pub(crate) fn design_family(rng: &mut ChaCha8Rng, max_primitives: usize, family: Family) -> Solid {
+    match family {
+        Family::Csg => design(rng, max_primitives),
+        Family::Filleted => filleted(rng, max_primitives),
+        Family::Lathe => lathe(rng, max_primitives),
+        Family::Freeform => freeform(rng, max_primitives),
+    }
+}
+
+/// A rounded base (fillet radius 0.03 to 0.4 of its smallest half size) and CSG features.
+fn filleted(rng: &mut ChaCha8Rng, max_primitives: usize) -> Solid {
+    let mut b = new_builder(max_primitives);
+    b.label = "base";
+    let frame = Frame::new(IDENTITY, [0.0; 3]);
+    let kind = if rng.random_bool(0.55) {
+        let half = [
+            rng.random_range(0.35..0.9),
+            rng.random_range(0.25..0.8),
+            rng.random_range(0.06..0.6),
+        ];
+        let m = half.iter().cloned().fold(f64::MAX, f64::min);
+        Kind::RoundedBox {
+            half,
+            radius: m * rng.random_range(0.1..0.9),
+        }
+    } else {
+        let radius = rng.random_range(0.3..0.85);
+        let half_height = rng.random_range(0.06..0.7);
+        Kind::RoundedCylinder {
+            radius,
+            half_height,
+            fillet: radius.min(half_height) * rng.random_range(0.1..0.9),
+        }
+    };
+    b.tree = b.push(kind, frame);
+    let target = rng.random_range(1..=b.max.max(2) / 2 + 1).min(b.max);
+    let mut tries = 0;
+    while b.prims.len() < target && tries < 4 * b.max {
+        tries += 1;
+        let Some((p, n)) = b.surface_point(rng) else {
+            break;
+        };
+        let r = rng.random_range(0.0..1.0);
+        if r < 0.35 {
+            // A rounded boss standing on the surface.
+            let z = Builder::maybe_tilt(rng, n, 0.2);
+            let radius: f64 = rng.random_range(0.06..0.3);
+            let hh = 0.5 * rng.random_range(0.08..0.4);
+            let fillet = radius.min(hh) * rng.random_range(0.2..0.8);
+            b.label = "rounded boss";
+            let node = b.push(
+                Kind::RoundedCylinder {
+                    radius,
+                    half_height: hh,
+                    fillet,
+                },
+                Frame::from_axis(add(p, scale(z, hh - 0.02)), z, 0.0),
+            );
+            b.union(node);
+        } else if r < 0.7 {
+            b.add_hole(rng, p, n);
+        } else if r < 0.9 {
+            b.add_pocket(rng, p, n);
+        } else {
+            b.add_boss(rng, p, n);
+        }
+    }
+    let rot = final_rotation(rng);
+    b.current().rotated(&rot)
+}
+
+/// A turned part along `z`: 2 to 4 coaxial sections, grooves, a bore, cross holes.
+fn lathe(rng: &mut ChaCha8Rng, max_primitives: usize) -> Solid {
+    let mut b = new_builder(max_primitives.max(4));
+    let sections = rng.random_range(2..=4);
+    let total = rng.random_range(1.2..1.9);
+    let mut z = -0.5 * total;
+    let mut radius: f64 = rng.random_range(0.2..0.6);
+    let mut nodes = Vec::new();
+    let mut widest: f64 = 0.0;
+    for _ in 0..sections {
+        let h = total / sections as f64 * rng.random_range(0.7..1.3);
+        let hh = 0.5 * h;
+        let frame = Frame::new(IDENTITY, [0.0, 0.0, z + hh]);
+        let r = rng.random_range(0.0..1.0);
+        b.label = "section";
+        let kind = if r < 0.4 {
+            Kind::Cylinder {
+                radius,
+                half_height: hh,
+            }
+        } else if r < 0.7 {
+            let next = (radius * rng.random_range(0.5..1.5)).clamp(0.08, 0.8);
+            let k = Kind::Cone {
+                r_bottom: radius,
+                r_top: next,
+                half_height: hh,
+            };
+            radius = next;
+            k
+        } else {
+            Kind::RoundedCylinder {
+                radius,
+                half_height: hh,
+                fillet: radius.min(hh) * rng.random_range(0.15..0.8),
+            }
+        };
+        widest = widest.max(radius);
+        nodes.push(b.push(kind, frame));
+        z += h;
+        radius = (radius * rng.random_range(0.6..1.5)).clamp(0.08, 0.8);
+    }
+    b.tree = Csg::Union(nodes);
+    // Grooves: tori cutting into a section's side.
+    for _ in 0..rng.random_range(0..=2) {
+        if b.remaining() == 0 {
+            break;
+        }
+        let Some((p, _)) = b.surface_point(rng) else {
+            break;
+        };
+        let rho = p[0].hypot(p[1]);
+        if rho < 0.1 {
+            continue;
+        }
+        let minor = rng.random_range(0.02..0.06);
+        b.label = "groove";
+        let node = b.push(
+            Kind::Torus {
+                major: rho + 0.3 * minor,
+                minor,
+            },
+            Frame::new(IDENTITY, [0.0, 0.0, p[2]]),
+        );
+        b.subtract(node);
+    }
+    // An axial bore through the part, or a blind one from the top.
+    if b.remaining() > 0 && rng.random_bool(0.6) {
+        b.label = "bore";
+        let r = rng.random_range(0.04..(0.6 * widest).max(0.05));
+        let node = b.push(
+            Kind::Cylinder {
+                radius: r.min(0.3),
+                half_height: if rng.random_bool(0.5) {
+                    FAR
+                } else {
+                    0.5 * total
+                },
+            },
+            Frame::new(
+                IDENTITY,
+                [
+                    0.0,
+                    0.0,
+                    if rng.random_bool(0.5) {
+                        0.0
+                    } else {
+                        0.5 * total
+                    },
+                ],
+            ),
+        );
+        b.subtract(node);
+    }
+    // Cross holes.
+    if b.remaining() > 0 && rng.random_bool(0.35) {
+        b.label = "cross hole";
+        let zc = rng.random_range(-0.4 * total..0.4 * total);
+        let node = b.push(
+            Kind::Cylinder {
+                radius: rng.random_range(0.03..0.1),
+                half_height: FAR,
+            },
+            Frame::from_axis([0.0, 0.0, zc], [1.0, 0.0, 0.0], 0.0),
+        );
+        b.subtract(node);
+    }
+    let rot = final_rotation(rng);
+    b.current().rotated(&rot)
+}
+
+/// A free-form body: an ellipsoid (semi-axes 0.25 to 0.9), alone or with a second ellipsoid, a
+/// smooth rounded box (fillet at least half its smallest half size) or a bore.
+fn freeform(rng: &mut ChaCha8Rng, max_primitives: usize) -> Solid {
+    let mut b = new_builder(max_primitives.max(3));
+    let radii = [
+        rng.random_range(0.45..0.9),
+        rng.random_range(0.3..0.8),
+        rng.random_range(0.25..0.7),
+    ];
+    b.label = "body";
+    b.tree = b.push(
+        Kind::Ellipsoid { radii },
+        Frame::new(random_rotation(rng), [0.0; 3]),
+    );
+    let r = rng.random_range(0.0..1.0);
+    if r < 0.45 {
+        // Alone.
+    } else if r < 0.65 {
+        let Some((p, _)) = b.surface_point(rng) else {
+            return b.current();
+        };
+        b.label = "lobe";
+        let node = b.push(
+            Kind::Ellipsoid {
+                radii: [
+                    rng.random_range(0.15..0.45),
+                    rng.random_range(0.12..0.4),
+                    rng.random_range(0.1..0.35),
+                ],
+            },
+            Frame::new(random_rotation(rng), p),
+        );
+        b.union(node);
+    } else if r < 0.85 {
+        let half = [
+            rng.random_range(0.2..0.5),
+            rng.random_range(0.2..0.5),
+            rng.random_range(0.15..0.4),
+        ];
+        let m = half.iter().cloned().fold(f64::MAX, f64::min);
+        b.label = "rounded block";
+        let Some((p, _)) = b.surface_point(rng) else {
+            return b.current();
+        };
+        let node = b.push(
+            Kind::RoundedBox {
+                half,
+                radius: m * rng.random_range(0.5..0.95),
+            },
+            Frame::new(random_rotation(rng), scale(p, 0.7)),
+        );
+        b.union(node);
+    } else {
+        b.label = "bore";
+        let node = b.push(
+            Kind::Cylinder {
+                radius: rng.random_range(0.05..0.2),
+                half_height: FAR,
+            },
+            Frame::new(random_rotation(rng), [0.0; 3]),
+        );
+        b.subtract(node);
+    }
+    b.current()
 }

@@ -151,7 +151,6 @@ impl<'a> ExactDistance<'a> {
                 .then(a.1.total_cmp(&b.1))
                 .then(a.2.cmp(&b.2))
         });
-        relevant.truncate(MAX_PATCHES);
         // Each with its projection of `p` (the start of its edges' and corners' iterations)
         // and |g(p)|, the distance to its whole surface.
         let patches: Vec<(Patch, V3, f64)> = relevant
@@ -164,10 +163,14 @@ impl<'a> ExactDistance<'a> {
         // Faces, edges and corners, by a lower bound of their distance: the largest distance to
         // the whole surfaces they lie on. Tried in that order until the bound reaches the best
         // boundary point found (which starts as the nearest sample).
-        let m = patches.len();
+        // Every relevant piece as a face (a closed-form projection for most); edges and
+        // corners among the first MAX_PATCHES.
+        let m = patches.len().min(MAX_PATCHES);
         let mut sets: Vec<(f64, [usize; 3], usize)> = Vec::new();
+        for (a, pa) in patches.iter().enumerate() {
+            sets.push((pa.2, [a, 0, 0], 1));
+        }
         for a in 0..m {
-            sets.push((patches[a].2, [a, 0, 0], 1));
             for b in a + 1..m {
                 sets.push((patches[a].2.max(patches[b].2), [a, b, 0], 2));
                 for c in b + 1..m {
@@ -179,7 +182,7 @@ impl<'a> ExactDistance<'a> {
         sets.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.2.cmp(&y.2)));
         let mut best = d_up;
         // Singular points of the pieces (the apex of a drill point): candidates of their own.
-        for (pa, _, _) in &patches {
+        for (pa, _, _) in &patches[..m] {
             for (apex, axis) in self.solid.patch_apexes(*pa) {
                 let d = norm(sub(p, apex));
                 if d < best && self.on_boundary(apex, &[axis]) {
@@ -227,8 +230,8 @@ impl<'a> ExactDistance<'a> {
     }
 
     /// The point of the intersection of `patches` (one, two or three smooth surfaces) closest
-    /// to `p`. One surface: the exact projection `p - g(p) grad g(p)` (the patch functions are
-    /// distances to the whole surface), refined once. Two or three: a few Gauss-Newton steps
+    /// to `p`. One surface whose function is a distance: the exact projection
+    /// `p - g(p) grad g(p)`, refined twice. Two or three: a few Gauss-Newton steps
     /// from `start` (each moves to the point of the linearised constraints closest to `p`),
     /// then Newton on the Lagrange conditions with the constraints' Hessians by central
     /// differences (quadratic convergence). `None` when it does not converge (tangent
@@ -247,7 +250,7 @@ impl<'a> ExactDistance<'a> {
         };
         let mut x = start;
         let mut mu = [0.0f64; 3];
-        if k == 1 {
+        if k == 1 && self.solid.patch_is_distance(patches[0]) {
             x = p;
             for _ in 0..3 {
                 let (g, n) = eval(x);
@@ -256,7 +259,11 @@ impl<'a> ExactDistance<'a> {
             let (_, n) = eval(x);
             mu[0] = dot(sub(x, p), n[0]);
         } else {
-            // Gauss-Newton warm-up: x = p + sum_j mu_j n_j on the linearised constraints.
+            // Gauss-Newton warm-up: x = p + sum_j mu_j n_j on the linearised constraints (from
+            // the projection of `p` for a single surface).
+            if k == 1 {
+                x = start;
+            }
             for _ in 0..8 {
                 let (g, n) = eval(x);
                 let mut a = [[0.0f64; 3]; 3];
@@ -535,6 +542,29 @@ mod tests {
                 },
                 Box::new(|q: V3| ((q[0].hypot(q[1]) - 0.5).hypot(q[2]) - 0.15).abs()),
             ),
+            (
+                Kind::RoundedBox {
+                    half: [0.4, 0.3, 0.2],
+                    radius: 0.07,
+                },
+                Box::new(|q: V3| {
+                    let d: V3 = std::array::from_fn(|k| q[k].abs() - ([0.4, 0.3, 0.2][k] - 0.07));
+                    let out = norm(d.map(|x| x.max(0.0)));
+                    (out + d[0].max(d[1]).max(d[2]).min(0.0) - 0.07).abs()
+                }),
+            ),
+            (
+                Kind::RoundedCylinder {
+                    radius: 0.35,
+                    half_height: 0.25,
+                    fillet: 0.08,
+                },
+                Box::new(|q: V3| {
+                    let d = [q[0].hypot(q[1]) - 0.27, q[2].abs() - 0.17];
+                    let out = d[0].max(0.0).hypot(d[1].max(0.0));
+                    (out + d[0].max(d[1]).min(0.0) - 0.08).abs()
+                }),
+            ),
         ];
         for (kind, exact) in cases {
             let solid = single(kind.clone(), frame);
@@ -596,7 +626,39 @@ mod tests {
             samples: 1000,
             ..Default::default()
         };
-        let mut solids: Vec<(Solid, TriMesh)> = vec![(drilled.clone(), rough_mesh(&drilled))];
+        // A free-form body (an ellipsoid) with a rounded box and a drilled hole.
+        let egg = Solid::new(
+            vec![
+                Primitive::new(
+                    Kind::Ellipsoid {
+                        radii: [0.6, 0.35, 0.25],
+                    },
+                    Frame::new(random_rotation(&mut rng), [0.0; 3]),
+                ),
+                Primitive::new(
+                    Kind::RoundedBox {
+                        half: [0.25, 0.25, 0.15],
+                        radius: 0.06,
+                    },
+                    Frame::new(IDENTITY, [0.3, 0.1, 0.2]),
+                ),
+                Primitive::new(
+                    Kind::Cylinder {
+                        radius: 0.08,
+                        half_height: 1.0,
+                    },
+                    Frame::new(IDENTITY, [-0.2, 0.0, 0.0]),
+                ),
+            ],
+            Csg::Difference(
+                Box::new(Csg::Union(vec![Csg::Prim(0), Csg::Prim(1)])),
+                vec![Csg::Prim(2)],
+            ),
+        );
+        let mut solids: Vec<(Solid, TriMesh)> = vec![
+            (drilled.clone(), rough_mesh(&drilled)),
+            (egg.clone(), rough_mesh(&egg)),
+        ];
         for seed in [11, 12, 13] {
             let s = crate::synth::generate(seed, &opts).unwrap();
             solids.push((s.solid, s.mesh));

@@ -45,6 +45,7 @@ pub mod design;
 pub mod distance;
 pub mod geom;
 pub mod primitive;
+pub mod smooth;
 
 use std::time::{Duration, Instant};
 
@@ -58,6 +59,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 pub use csg::{Csg, Patch, Solid};
+pub use design::Family;
 pub use geom::{Frame, V3};
 pub use primitive::{Kind, Primitive};
 
@@ -95,6 +97,76 @@ pub struct SynthOptions {
     pub max_attempts: u32,
     /// Run the exact [`validity::check`] (self-intersections included) on every mesh (true).
     pub validate: bool,
+    /// Relative frequencies of the shape families (CSG parts only by default).
+    pub mix: SynthMix,
+}
+
+/// Relative frequencies of the families of generated shapes ([`design::Family`]): each design
+/// draws its family from these weights (from the seed's random stream). With only `csg`
+/// positive (the default), no draw is made, so the shapes are those of earlier versions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SynthMix {
+    /// Sharp-edged CSG parts.
+    pub csg: f64,
+    /// CSG features on a filleted base, rounded bosses.
+    pub filleted: f64,
+    /// Turned parts (coaxial sections, grooves, bores).
+    pub lathe: f64,
+    /// Free-form bodies without edges (ellipsoids, smooth blocks).
+    pub freeform: f64,
+}
+
+impl Default for SynthMix {
+    fn default() -> Self {
+        Self {
+            csg: 1.0,
+            filleted: 0.0,
+            lathe: 0.0,
+            freeform: 0.0,
+        }
+    }
+}
+
+impl SynthMix {
+    fn weights(&self) -> [f64; 4] {
+        [self.csg, self.filleted, self.lathe, self.freeform]
+    }
+
+    /// Checks that the weights are finite, non-negative and not all zero.
+    pub fn check(&self) -> Result<()> {
+        let w = self.weights();
+        if w.iter().any(|x| !(x.is_finite() && *x >= 0.0)) || !(w.iter().sum::<f64>() > 0.0) {
+            return Err(DataError::Invalid(format!(
+                "the family weights must be non-negative and not all zero, got {self:?}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The family of a design: `csg` without a draw when it is the only one.
+    fn draw(&self, rng: &mut ChaCha8Rng) -> design::Family {
+        let w = self.weights();
+        if w[1..].iter().all(|&x| x == 0.0) {
+            return design::Family::Csg;
+        }
+        let x = rng.random::<f64>() * w.iter().sum::<f64>();
+        let mut acc = 0.0;
+        for (i, f) in [
+            design::Family::Csg,
+            design::Family::Filleted,
+            design::Family::Lathe,
+            design::Family::Freeform,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            acc += w[i];
+            if x < acc {
+                return f;
+            }
+        }
+        design::Family::Freeform
+    }
 }
 
 impl Default for SynthOptions {
@@ -110,6 +182,7 @@ impl Default for SynthOptions {
             far_fraction: 0.01,
             max_attempts: 30,
             validate: true,
+            mix: SynthMix::default(),
         }
     }
 }
@@ -148,6 +221,8 @@ pub struct SynthShape {
     pub samples: Vec<[f64; 3]>,
     /// Outward unit normals of the samples.
     pub normals: Vec<[f64; 3]>,
+    /// The family of the design.
+    pub family: design::Family,
     /// The CSG tree, one primitive per line (same frame).
     pub description: String,
     /// The analytic solid (same frame).
@@ -204,6 +279,7 @@ pub fn generate(seed: u64, opts: &SynthOptions) -> Result<SynthShape> {
             opts.samples_per_cell
         )));
     }
+    opts.mix.check()?;
     if opts.max_primitives == 0 || opts.max_attempts == 0 || opts.volume_samples < 1000 {
         return Err(DataError::Invalid(
             "max_primitives and max_attempts must be positive and volume_samples at least 1000"
@@ -232,7 +308,8 @@ pub fn generate(seed: u64, opts: &SynthOptions) -> Result<SynthShape> {
 /// One design, sampled, meshed and checked; `Err(reason)` when rejected.
 fn attempt_shape(rng: &mut ChaCha8Rng, opts: &SynthOptions) -> Result<SynthShape, String> {
     let t0 = Instant::now();
-    let solid = design::design(rng, opts.max_primitives);
+    let family = opts.mix.draw(rng);
+    let solid = design::design_family(rng, opts.max_primitives, family);
     let keys: [u64; 3] = [rng.random(), rng.random(), rng.random()];
     let n_first = opts.samples.max(4096);
     let first = solid
@@ -342,6 +419,7 @@ fn attempt_shape(rng: &mut ChaCha8Rng, opts: &SynthOptions) -> Result<SynthShape
         mesh,
         samples,
         normals,
+        family,
         description: solid.describe(),
         solid,
         attempts: 1,

@@ -10,6 +10,7 @@ use std::fmt;
 use rand::Rng;
 
 use super::geom::{Frame, V3, sub};
+use super::smooth;
 
 /// The shape of a primitive in its local frame (axis `z`, centre at the origin). Heights are
 /// half heights along `z`.
@@ -56,6 +57,30 @@ pub enum Kind {
         /// Half height.
         half_height: f64,
     },
+    /// A box whose 12 edges are rounded by a fillet of radius `radius` (`< min(half)`): six
+    /// faces, twelve quarter cylinders, eight sphere corners, tangent-continuous.
+    RoundedBox {
+        /// Half extents.
+        half: V3,
+        /// Fillet radius.
+        radius: f64,
+    },
+    /// A cylinder of axis `z` whose two rims are rounded by a fillet of radius `fillet`
+    /// (`< min(radius, half_height)`): side, caps and two quarter tori.
+    RoundedCylinder {
+        /// Radius.
+        radius: f64,
+        /// Half height.
+        half_height: f64,
+        /// Fillet radius of the rims.
+        fillet: f64,
+    },
+    /// An ellipsoid of semi-axes `radii` along the local axes (free-form: no edge, varying
+    /// curvature).
+    Ellipsoid {
+        /// Semi-axes.
+        radii: V3,
+    },
     /// Extrusion along `z` of a stadium: the points of the `xy` plane within `radius` of the
     /// segment from `(-half_length, 0)` to `(half_length, 0)`.
     Slot {
@@ -70,9 +95,12 @@ pub enum Kind {
 
 impl Kind {
     /// The name of the kind (`"box"`, `"cylinder"`, `"cone"`, `"sphere"`, `"torus"`, `"prism"`,
-    /// `"slot"`).
+    /// `"slot"`, `"rounded box"`, `"rounded cylinder"`, `"ellipsoid"`).
     pub fn name(&self) -> &'static str {
         match self {
+            Kind::RoundedBox { .. } => "rounded box",
+            Kind::RoundedCylinder { .. } => "rounded cylinder",
+            Kind::Ellipsoid { .. } => "ellipsoid",
             Kind::Box { .. } => "box",
             Kind::Cylinder { .. } => "cylinder",
             Kind::Cone { .. } => "cone",
@@ -86,6 +114,22 @@ impl Kind {
     /// The same kind with every length multiplied by `s > 0`.
     pub(crate) fn scaled(&self, s: f64) -> Kind {
         match self {
+            Kind::RoundedBox { half, radius } => Kind::RoundedBox {
+                half: half.map(|x| x * s),
+                radius: radius * s,
+            },
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => Kind::RoundedCylinder {
+                radius: radius * s,
+                half_height: half_height * s,
+                fillet: fillet * s,
+            },
+            Kind::Ellipsoid { radii } => Kind::Ellipsoid {
+                radii: radii.map(|x| x * s),
+            },
             Kind::Box { half } => Kind::Box {
                 half: half.map(|x| x * s),
             },
@@ -133,6 +177,13 @@ impl Kind {
     pub fn inside_local(&self, q: V3) -> bool {
         let [x, y, z] = q;
         match self {
+            Kind::RoundedBox { half, radius } => smooth::rounded_box_inside(*half, *radius, q),
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => smooth::rounded_cylinder_inside(*radius, *half_height, *fillet, q),
+            Kind::Ellipsoid { radii } => smooth::ellipsoid_inside(*radii, q),
             Kind::Box { half } => x.abs() <= half[0] && y.abs() <= half[1] && z.abs() <= half[2],
             Kind::Cylinder {
                 radius,
@@ -186,6 +237,13 @@ impl Kind {
     /// Local axis-aligned bounding box `(min, max)`.
     pub(crate) fn local_box(&self) -> (V3, V3) {
         let h = match self {
+            Kind::RoundedBox { half, .. } => *half,
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                ..
+            } => [*radius, *radius, *half_height],
+            Kind::Ellipsoid { radii } => *radii,
             Kind::Box { half } => *half,
             Kind::Cylinder {
                 radius,
@@ -233,6 +291,14 @@ impl Kind {
         let zr = |h: f64| clip.z_range(h);
         let cap = |z: f64, a: f64| if clip.has_z(z) { a } else { 0.0 };
         match self {
+            // Fillets and free-form surfaces: whole parts (clipping only saves samples).
+            Kind::RoundedBox { half, radius } => smooth::rounded_box_areas(*half, *radius),
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => smooth::rounded_cylinder_areas(*radius, *half_height, *fillet),
+            Kind::Ellipsoid { radii } => vec![smooth::ellipsoid_area(*radii)],
             Kind::Box { half } => (0..6)
                 .map(|part| {
                     let (a, sign) = (part / 2, if part % 2 == 0 { 1.0 } else { -1.0 });
@@ -312,6 +378,15 @@ impl Kind {
             z0 + (z1 - z0) * u(rng)
         };
         match self {
+            Kind::RoundedBox { half, radius } => {
+                smooth::rounded_box_sample(*half, *radius, part, rng)
+            }
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => smooth::rounded_cylinder_sample(*radius, *half_height, *fillet, part, rng),
+            Kind::Ellipsoid { radii } => smooth::ellipsoid_sample(*radii, rng),
             Kind::Box { half } => {
                 let axis = part / 2;
                 let sign = if part % 2 == 0 { 1.0 } else { -1.0 };
@@ -469,6 +544,9 @@ impl Kind {
     /// with the axis direction.
     pub(crate) fn part_apexes(&self, part: usize) -> Vec<(V3, V3)> {
         match self {
+            Kind::RoundedBox { .. } | Kind::RoundedCylinder { .. } | Kind::Ellipsoid { .. } => {
+                Vec::new()
+            }
             Kind::Cone {
                 r_bottom,
                 r_top,
@@ -487,9 +565,18 @@ impl Kind {
         }
     }
 
+    /// Whether the function of [`Kind::patch`] for part `part` is the distance to its whole
+    /// surface (all but the ellipsoid's).
+    pub(crate) fn part_is_distance(&self, _part: usize) -> bool {
+        !matches!(self, Kind::Ellipsoid { .. })
+    }
+
     /// Whether surface part `part` lies on a plane (faces and caps).
     pub(crate) fn part_is_planar(&self, part: usize) -> bool {
         match self {
+            Kind::RoundedBox { .. } => part < 6,
+            Kind::RoundedCylinder { .. } => part == 1 || part == 2,
+            Kind::Ellipsoid { .. } => false,
             Kind::Box { .. } | Kind::Prism { .. } => true,
             Kind::Cylinder { .. } | Kind::Cone { .. } => part > 0,
             Kind::Sphere { .. } | Kind::Torus { .. } => false,
@@ -516,6 +603,13 @@ impl Kind {
             }
         };
         match self {
+            Kind::RoundedBox { half, radius } => smooth::rounded_box_patch(*half, *radius, part, q),
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => smooth::rounded_cylinder_patch(*radius, *half_height, *fillet, part, q),
+            Kind::Ellipsoid { radii } => smooth::ellipsoid_patch(*radii, q),
             Kind::Box { half } => {
                 let (a, sign) = (part / 2, if part % 2 == 0 { 1.0 } else { -1.0 });
                 let mut n = [0.0; 3];
@@ -858,6 +952,18 @@ impl fmt::Display for Primitive {
     /// E.g. `cylinder(radius=0.1000, half_height=0.2000) at [..] axis z=[..] x=[..]`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.kind {
+            Kind::RoundedBox { half, radius } => {
+                write!(f, "rounded_box(half={}, radius={radius:.4})", fmt3(*half))?
+            }
+            Kind::RoundedCylinder {
+                radius,
+                half_height,
+                fillet,
+            } => write!(
+                f,
+                "rounded_cylinder(radius={radius:.4}, half_height={half_height:.4}, fillet={fillet:.4})"
+            )?,
+            Kind::Ellipsoid { radii } => write!(f, "ellipsoid(radii={})", fmt3(*radii))?,
             Kind::Box { half } => write!(f, "box(half={})", fmt3(*half))?,
             Kind::Cylinder {
                 radius,
@@ -958,7 +1064,45 @@ mod tests {
                 radius: 0.1,
                 half_height: 0.05,
             },
+            Kind::RoundedBox {
+                half: [0.3, 0.2, 0.15],
+                radius: 0.05,
+            },
+            Kind::RoundedCylinder {
+                radius: 0.3,
+                half_height: 0.2,
+                fillet: 0.06,
+            },
+            Kind::Ellipsoid {
+                radii: [0.4, 0.25, 0.15],
+            },
         ]
+    }
+
+    /// The ellipsoid's area against the closed form of a prolate spheroid, and its sampling
+    /// against the spheroid's exact area share above half its height.
+    #[test]
+    fn ellipsoid_area_and_sampling() {
+        let (a, c) = (0.2f64, 0.5f64);
+        let e = (1.0 - a * a / (c * c)).sqrt();
+        let want = 2.0 * PI * a * a * (1.0 + c / (a * e) * e.asin());
+        let got = smooth::ellipsoid_area([a, a, c]);
+        assert!((got - want).abs() < 2e-5 * want, "{got} vs {want}");
+        // Area of the cap z > c/2: 2 pi a/c int_{c/2}^{c} sqrt(c^2 - e^2 z^2) dz.
+        let f =
+            |z: f64| 0.5 * (z * (c * c - e * e * z * z).sqrt() + c * c / e * (e * z / c).asin());
+        let cap = 2.0 * PI * a / c * (f(c) - f(0.5 * c));
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        let n = 200_000;
+        let hits = (0..n)
+            .filter(|_| smooth::ellipsoid_sample([a, a, c], &mut rng).0[2] > 0.5 * c)
+            .count() as f64
+            / n as f64;
+        assert!(
+            (hits - cap / want).abs() < 0.004,
+            "{hits} vs {}",
+            cap / want
+        );
     }
 
     #[test]

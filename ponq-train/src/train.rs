@@ -54,6 +54,10 @@ pub struct RunSummary {
     pub validation: Vec<(usize, LossTerms)>,
     /// Whether the time limit stopped the run early.
     pub stopped_by_time: bool,
+    /// Optimizer steps in total, across every run continued with `--resume`.
+    pub total_steps: usize,
+    /// Training wall-clock seconds in total, across every run continued with `--resume`.
+    pub total_seconds: f64,
 }
 
 /// Saved with every checkpoint.
@@ -544,6 +548,8 @@ pub fn run_with_shapes(
             ));
         }
         summary.epochs_done = state.epochs_done;
+        summary.total_steps = state.steps_done;
+        summary.total_seconds = state.seconds;
         let limit = cfg.train.time_limit_minutes;
         if limit > 0.0
             && start.elapsed().as_secs_f64() > limit * 60.0

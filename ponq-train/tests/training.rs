@@ -196,6 +196,10 @@ fn resume_repeats_the_uninterrupted_run() {
     )
     .unwrap();
     assert_eq!(rest.epochs_done, 3);
+    // Totals add up across the interrupted run and its continuation.
+    assert_eq!(rest.total_steps, whole.total_steps);
+    assert_eq!(first.total_steps + rest.step_losses.len(), rest.total_steps);
+    assert!(rest.total_seconds > first.total_seconds);
     let steps = first.step_losses.len();
     assert_eq!(whole.step_losses.len(), steps + rest.step_losses.len());
     for (i, (x, y)) in whole.step_losses[..steps]

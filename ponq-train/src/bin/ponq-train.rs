@@ -109,6 +109,11 @@ fn real_main() -> Result<()> {
             s.last_train.total,
             out.join("model.bpk").display()
         );
+        println!(
+            "in total (across runs continued with --resume): {} steps, {:.1} minutes of training",
+            s.total_steps,
+            s.total_seconds / 60.0
+        );
     }
     Ok(())
 }

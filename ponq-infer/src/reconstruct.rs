@@ -27,6 +27,8 @@ pub struct InferOptions {
     pub coarsen: u32,
     /// Open-surface culling threshold.
     pub open: Option<f64>,
+    /// Flip quadrilateral diagonals onto sharp edges (`ponq_mesh::flips`; default true).
+    pub align_creases: bool,
     /// Cells are kept when their occupancy exceeds this (0.5).
     pub occupancy_threshold: f32,
     /// Use the authors' cell bases (only for their pretrained weights).
@@ -41,6 +43,7 @@ impl Default for InferOptions {
             lite: false,
             coarsen: 0,
             open: None,
+            align_creases: true,
             occupancy_threshold: 0.5,
             authors_cell_base: false,
         }
@@ -144,6 +147,7 @@ pub fn infer(
             frame.cells.map(|c| -1.0 + c as f64 * 2.0 / frame.n as f64),
         ),
         open_threshold: opts.open,
+        align_creases: opts.align_creases,
         ..Default::default()
     };
     let (mesh, meshing, message) = if ponq.is_empty() {

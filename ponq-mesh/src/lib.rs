@@ -8,7 +8,8 @@
 //! [`quadric`] (v* from Q) -> [`delaunay`] (exact 3D Delaunay of v* + protective corners) ->
 //! [`tagging`] (inside / outside / unknown tets) -> [`score`] (face scores) ->
 //! [`maxflow`] + [`cut`] (minimum s-t cut) -> [`extract`] (oriented boundary) ->
-//! [`manifold`] (relabel tets until the boundary is a strict manifold).
+//! [`manifold`] (relabel tets until the boundary is a strict manifold) -> [`flips`] (quadrilateral
+//! diagonals onto the sharp edges the quadrics describe).
 //! [`mesher`] runs them all.
 //!
 //! ```no_run
@@ -25,6 +26,7 @@ pub mod cut;
 pub mod delaunay;
 pub mod error;
 pub mod extract;
+pub mod flips;
 pub mod io;
 pub mod lite;
 pub mod manifold;

@@ -30,6 +30,10 @@ pub struct MeshingOptions {
     /// Open-surface culling: keep a triangle only if one of its vertices has anisotropy
     /// `lambda2/lambda1 <= t` (the paper uses 0.35 to 0.4). `None` keeps the closed mesh.
     pub open_threshold: Option<f64>,
+    /// Flip quadrilateral diagonals onto the sharp edges the quadrics describe
+    /// ([`crate::flips`]; default true, closed surfaces only). `false` keeps the triangles of
+    /// the minimum cut as they are (the behaviour before this option).
+    pub align_creases: bool,
 }
 
 impl Default for MeshingOptions {
@@ -40,6 +44,7 @@ impl Default for MeshingOptions {
             small_tet_factor: 3.0,
             manifold: true,
             open_threshold: None,
+            align_creases: true,
         }
     }
 }
@@ -120,6 +125,8 @@ pub struct MeshingStats {
     pub cut: CutStats,
     /// The manifold repair.
     pub manifold: ManifoldStats,
+    /// The crease-aligning flips.
+    pub flips: crate::flips::FlipStats,
     /// Stage timings.
     pub times: StageTimes,
 }
@@ -325,6 +332,11 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     let t5 = Instant::now();
     let (mut mesh, back) = extract_boundary(&cx, &labels);
     let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
+    if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
+        let q: Vec<Quadric> = back.iter().map(|&v| cx.quadrics[v as usize]).collect();
+        let n: Vec<[f64; 3]> = back.iter().map(|&v| cx.normals[v as usize]).collect();
+        stats.flips = crate::flips::align_creases(&mut mesh, &q, &n, cx.h);
+    }
     if let Some(th) = opts.open_threshold {
         let aniso: Vec<f64> = back
             .iter()

@@ -60,6 +60,10 @@ struct Args {
     /// Also write the predicted PoNQ (points, normals, quadrics, v*) as `.npz`.
     #[arg(long, value_name = "P.npz")]
     save_ponq: Option<PathBuf>,
+    /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
+    /// onto the sharp edges the quadrics describe.
+    #[arg(long)]
+    no_crease_flips: bool,
     /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
     /// Conv3d layers). Same numbers up to float rounding; GPU backends use the stock layers.
     #[arg(long, default_value = "fast")]
@@ -141,6 +145,7 @@ fn run(args: &Args) -> Result<Outcome> {
         coarsen: args.coarsen,
         open: args.open,
         authors_cell_base: authors,
+        align_creases: !args.no_crease_flips,
         ..Default::default()
     };
     let pb = if args.quiet {

@@ -52,6 +52,10 @@ struct Args {
     /// but may have non-manifold edges or vertices, as the authors' mesher).
     #[arg(long)]
     no_manifold: bool,
+    /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
+    /// onto the sharp edges the quadrics describe (the behaviour before these flips).
+    #[arg(long)]
+    no_crease_flips: bool,
     /// Skip the exact validity check of the output (it is cheap; on by default).
     #[arg(long)]
     no_check: bool,
@@ -89,6 +93,7 @@ fn run(args: &Args) -> Result<bool> {
         domain,
         manifold: !args.no_manifold,
         open_threshold: args.open,
+        align_creases: !args.no_crease_flips,
         ..Default::default()
     };
     let out = mesh_ponq(&ponq, &opts)?;
@@ -113,14 +118,15 @@ fn run(args: &Args) -> Result<bool> {
             println!("note: {msg}");
         }
         println!(
-            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets",
+            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips",
             s.tets,
             s.tagged[0],
             s.tagged[1],
             s.tagged[2],
             s.cut.nodes,
             s.cut.edges,
-            s.manifold.flipped_tets
+            s.manifold.flipped_tets,
+            s.flips.flips
         );
         println!(
             "time (ms): read {:.1}, prepare {:.1}, delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, write {:.1}; meshing total {:.1}",

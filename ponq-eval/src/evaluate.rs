@@ -53,6 +53,9 @@ pub struct EvalOptions {
     pub renders: usize,
     /// Network tile size.
     pub tile: usize,
+    /// Name of the PoNQ rows (`PoNQ` by default; the lite rows are `<name>-lite`), so that
+    /// several models can share one report.
+    pub name: String,
 }
 
 /// Metrics of `pred` against the truth (both in the `[-1,1]` frame).
@@ -144,7 +147,11 @@ pub fn evaluate(
         let (cd, f1, nc, ecd, ef1, watertight) = metrics(&mesh, &t, opts.samples);
         rows.push(Row {
             shape: id.to_string(),
-            method: m.name().to_string(),
+            method: match m {
+                Method::Ponq => opts.name.clone(),
+                Method::Lite => format!("{}-lite", opts.name),
+                Method::Mc => m.name().to_string(),
+            },
             res,
             cd,
             f1,

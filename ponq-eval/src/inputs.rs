@@ -71,6 +71,20 @@ pub fn inputs(data: &Path, split: Option<&Path>) -> Result<(Vec<Shape>, Vec<Stri
     Ok((files, missing))
 }
 
+/// The group of a shape file: the first folder of its path below the data folder (e.g. `cad`
+/// or `freeform`), or an empty string for a file directly in it.
+pub fn group_of(data: &Path, file: &Path) -> String {
+    file.strip_prefix(data)
+        .ok()
+        .and_then(|rel| {
+            let mut c = rel.components();
+            let first = c.next()?;
+            c.next()?;
+            Some(first.as_os_str().to_string_lossy().into_owned())
+        })
+        .unwrap_or_default()
+}
+
 /// Ground truth of a shape in the `[-1,1]` frame: the normalised mesh when the input is a
 /// mesh, else the record's samples and normals, plus its SDF grids.
 pub struct Truth {

@@ -27,6 +27,7 @@
 //!     samples: 100_000,
 //!     renders: 0,
 //!     tile: 48,
+//!     name: "PoNQ".into(),
 //! };
 //! for (id, path) in &shapes {
 //!     let (rows, _image) =
@@ -42,5 +43,7 @@ pub mod render;
 pub mod report;
 
 pub use evaluate::{EvalOptions, Method, evaluate};
-pub use inputs::{Shape, inputs};
-pub use report::{Row, read_rows, rows_path, summary_markdown, write_report, write_rows};
+pub use inputs::{Shape, group_of, inputs};
+pub use report::{
+    Row, read_rows, rows_path, summary_by_group, summary_markdown, write_report, write_rows,
+};

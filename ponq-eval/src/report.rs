@@ -136,6 +136,67 @@ pub fn summary_markdown(rows: &[Row]) -> String {
     s
 }
 
+/// Means and medians per (method, grid) of every group of shapes (`groups`: shape id to group
+/// name, e.g. `cad` / `freeform`), one Markdown table per group; empty with fewer than two
+/// groups.
+pub fn summary_by_group(
+    rows: &[Row],
+    groups: &std::collections::BTreeMap<String, String>,
+) -> String {
+    let mut names: Vec<&String> = groups.values().collect();
+    names.sort();
+    names.dedup();
+    if names.len() < 2 {
+        return String::new();
+    }
+    let mut s = String::new();
+    for g in names {
+        let sub: Vec<&Row> = rows
+            .iter()
+            .filter(|r| groups.get(&r.shape) == Some(g))
+            .collect();
+        let mut keys: Vec<(usize, String)> =
+            sub.iter().map(|r| (r.res, r.method.clone())).collect();
+        keys.sort();
+        keys.dedup();
+        s += &format!(
+            "\n### {g} (mean / median)\n\n| method | grid | shapes | CD x1e5 | F1 | NC | ECD x1e2 | EF1 | valid % |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
+        );
+        for (res, method) in keys {
+            let v: Vec<&&Row> = sub
+                .iter()
+                .filter(|r| r.res == res && r.method == method)
+                .collect();
+            let stat = |f: &dyn Fn(&Row) -> f64| {
+                let mut x: Vec<f64> = v.iter().map(|r| f(r)).filter(|x| x.is_finite()).collect();
+                if x.is_empty() {
+                    return "-".to_string();
+                }
+                x.sort_by(f64::total_cmp);
+                let mean = x.iter().sum::<f64>() / x.len() as f64;
+                let med = if x.len() % 2 == 1 {
+                    x[x.len() / 2]
+                } else {
+                    0.5 * (x[x.len() / 2 - 1] + x[x.len() / 2])
+                };
+                format!("{mean:.3} / {med:.3}")
+            };
+            s += &format!(
+                "| {method} | {}^3 | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+                res + 1,
+                v.len(),
+                stat(&|r| r.cd),
+                stat(&|r| r.f1),
+                stat(&|r| r.nc),
+                stat(&|r| r.ecd),
+                stat(&|r| r.ef1),
+                100.0 * v.iter().filter(|r| r.watertight).count() as f64 / v.len().max(1) as f64,
+            );
+        }
+    }
+    s
+}
+
 /// Reads all rows of `out/rows`.
 pub fn read_rows(out: &Path) -> Result<Vec<Row>> {
     let dir = out.join("rows");
@@ -156,9 +217,14 @@ pub fn read_rows(out: &Path) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
-/// Path of the rows of one (shape, resolution).
-pub fn rows_path(out: &Path, id: &str, res: usize) -> PathBuf {
-    out.join("rows").join(format!("{id}@{res}.csv"))
+/// Path of the rows of one (shape, resolution) for the model named `name` (`PoNQ`: no
+/// suffix).
+pub fn rows_path(out: &Path, id: &str, res: usize, name: &str) -> PathBuf {
+    if name == "PoNQ" {
+        out.join("rows").join(format!("{id}@{res}.csv"))
+    } else {
+        out.join("rows").join(format!("{id}@{res}@{name}.csv"))
+    }
 }
 
 /// Writes rows atomically.
@@ -176,10 +242,12 @@ pub fn write_rows(path: &Path, rows: &[Row]) -> Result<()> {
 }
 
 /// Writes `per_shape.csv`, `summary.md` and `report.md` of `out` from its rows.
+/// `groups` maps shape ids to groups (see [`summary_by_group`]; empty: no group tables).
 pub fn write_report(
     out: &Path,
     missing: &[String],
     failed: &[(String, String)],
+    groups: &std::collections::BTreeMap<String, String>,
 ) -> Result<Vec<Row>> {
     let mut rows = read_rows(out)?;
     rows.sort_by(|a, b| (a.res, &a.method, &a.shape).cmp(&(b.res, &b.method, &b.shape)));
@@ -190,7 +258,7 @@ pub fn write_report(
         csv.push('\n');
     }
     std::fs::write(out.join("per_shape.csv"), csv)?;
-    let summary = summary_markdown(&rows);
+    let summary = summary_markdown(&rows) + &summary_by_group(&rows, groups);
     std::fs::write(out.join("summary.md"), &summary)?;
     let mut rep = String::from(
         "# PoNQ-rs evaluation\n\nMeans over shapes; metrics at unit bounding-box diagonal (SPEC section 8); time is the reconstruction from the grid (network + meshing, or marching cubes).\n\n",

@@ -139,3 +139,80 @@ fn eval_inputs_are_found_recursively_and_ids_must_be_unique() {
     assert!(err.contains("two shapes with the id \"one\""), "{err}");
     std::fs::remove_dir_all(&d).ok();
 }
+
+/// Two models in one report (`--name`, `--no-mc` for the second), and per-group tables (CAD /
+/// free-form sub-folders) with means and medians.
+#[test]
+fn eval_run_compares_models_and_groups() {
+    let d = tmp("groups");
+    let data = d.join("data");
+    std::fs::create_dir_all(data.join("cad")).unwrap();
+    std::fs::create_dir_all(data.join("freeform")).unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    std::fs::copy(root.join("examples/csg.obj"), data.join("cad/csg.obj")).unwrap();
+    std::fs::copy(
+        root.join("examples/example001.obj"),
+        data.join("freeform/e1.obj"),
+    )
+    .unwrap();
+    let dev = backend::cpu();
+    let cfg = PonqNetConfig::new()
+        .with_width(8)
+        .with_points_per_cell(2)
+        .with_encoder_layers(1)
+        .with_decoder_blocks(1);
+    ponq_model::weights::save(&cfg.init(&dev), &cfg, &d.join("a.bpk")).unwrap();
+    ponq_model::weights::save(&cfg.init(&dev), &cfg, &d.join("b.bpk")).unwrap();
+    let report = d.join("report");
+    let run = |model: &str, extra: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
+            .args([
+                "run",
+                "--res",
+                "8",
+                "--samples",
+                "2000",
+                "--renders",
+                "0",
+                "-q",
+            ])
+            .arg("--data")
+            .arg(&data)
+            .arg("--model")
+            .arg(d.join(model))
+            .arg("-o")
+            .arg(&report)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run("a.bpk", &[]);
+    run("b.bpk", &["--name", "other", "--no-mc"]);
+    let rows = ponq_eval::read_rows(&report).unwrap();
+    let methods: std::collections::BTreeSet<&str> =
+        rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(
+        methods.into_iter().collect::<Vec<_>>(),
+        ["MC", "PoNQ", "other"]
+    );
+    assert_eq!(rows.len(), 6, "three methods for two shapes");
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    assert!(summary.contains("### cad (mean / median)"), "{summary}");
+    assert!(
+        summary.contains("### freeform (mean / median)"),
+        "{summary}"
+    );
+    assert!(summary.contains("| other | 9^3 | 1 |"), "{summary}");
+    // A name that is not a file-name component is refused.
+    let o = Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
+        .args(["run", "--res", "8", "--name", "a/b", "--data"])
+        .arg(&data)
+        .arg("-o")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--name"));
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -297,3 +297,61 @@ fn built_in_model_equals_the_shipped_file() {
     assert_eq!(a.points, b.points);
     assert_eq!(a.occupancy, b.occupancy);
 }
+
+/// `ponq-infer --backend wgpu` on a shipped example: a valid mesh with the vertex count of the
+/// CPU run (the floats may differ in the last bits). Skipped without an adapter unless
+/// `PONQ_REQUIRE_WGPU` is set.
+#[cfg(feature = "wgpu")]
+#[test]
+fn infer_on_wgpu_gives_the_cpu_mesh() {
+    if let Err(e) = ponq_model::backend::device(ponq_model::backend::BackendKind::Wgpu) {
+        assert!(
+            std::env::var_os("PONQ_REQUIRE_WGPU").is_none(),
+            "PONQ_REQUIRE_WGPU is set but the wgpu device does not work: {e}"
+        );
+        eprintln!("skipped: {e}");
+        return;
+    }
+    let d = tmp("wgpu");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/csg_sdf_33.npy");
+    let mut counts = Vec::new();
+    for backend in ["flex", "wgpu"] {
+        let out = d.join(format!("{backend}.obj"));
+        let o = Command::new(infer_exe())
+            .arg(&example)
+            .arg("-o")
+            .arg(&out)
+            .args(["--backend", backend])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{backend}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let m = ponq_mesh::io::read_mesh(&out).unwrap();
+        assert!(ponq_mesh::validity::check(&m).is_valid(), "{backend}");
+        counts.push((m.vertices.len(), m.faces.len()));
+    }
+    assert_eq!(counts[0], counts[1], "flex vs wgpu");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+/// `--backend cuda` without the feature (or without a driver) is a clear error, not a panic.
+#[test]
+fn missing_backends_are_clear_errors() {
+    let d = tmp("backend");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/csg_sdf_33.npy");
+    let o = Command::new(infer_exe())
+        .arg(&example)
+        .arg("-o")
+        .arg(d.join("o.obj"))
+        .args(["--backend", "cuda"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("cuda") || err.contains("CUDA"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -160,8 +160,15 @@ pub struct TrainSection {
     pub epochs: usize,
     /// Shapes per step.
     pub batch_size: usize,
+    /// Split each batch into this many micro-batches, run one after the other on one device
+    /// with their gradients summed (same step as the whole batch, less memory; 1: none).
+    pub micro_batches: usize,
     /// Learning rate.
     pub lr: f64,
+    /// Step decay of the learning rate: `[[epoch, factor], ...]`, from epoch `epoch` on
+    /// (counted from 0, as in `metrics.csv`'s epoch - 1) the rate is `lr * factor` (the
+    /// last step reached applies). Empty: constant.
+    pub lr_steps: Vec<(usize, f64)>,
     /// AdamW decoupled weight decay.
     pub weight_decay: f64,
     /// AMSGrad variant of AdamW.
@@ -189,11 +196,27 @@ pub struct TrainSection {
     pub time_limit_minutes: f64,
 }
 
+impl TrainSection {
+    /// The learning rate of epoch `epoch` (from 0): `lr` times the factor of the last step of
+    /// `lr_steps` at or before it.
+    pub fn lr_at(&self, epoch: usize) -> f64 {
+        self.lr
+            * self
+                .lr_steps
+                .iter()
+                .rev()
+                .find(|&&(e, _)| e <= epoch)
+                .map_or(1.0, |&(_, f)| f)
+    }
+}
+
 impl Default for TrainSection {
     fn default() -> Self {
         Self {
             epochs: 200,
             batch_size: 16,
+            micro_batches: 1,
+            lr_steps: Vec::new(),
             lr: 6.4e-5,
             weight_decay: 0.01,
             amsgrad: true,
@@ -279,8 +302,23 @@ impl TrainConfig {
         if t.epochs == 0 || t.batch_size == 0 || t.samples_per_shape == 0 {
             bail!("train.epochs, train.batch_size and train.samples_per_shape must be positive");
         }
+        if t.micro_batches == 0 || t.micro_batches > t.batch_size {
+            bail!(
+                "train.micro_batches must be between 1 and train.batch_size ({}), got {}",
+                t.batch_size,
+                t.micro_batches
+            );
+        }
         if !(t.lr > 0.0 && t.lr.is_finite()) {
             bail!("train.lr must be positive, got {}", t.lr);
+        }
+        if t.lr_steps.windows(2).any(|w| w[0].0 >= w[1].0)
+            || t.lr_steps.iter().any(|&(_, f)| !(f > 0.0 && f.is_finite()))
+        {
+            bail!(
+                "train.lr_steps must list increasing epochs with positive factors, got {:?}",
+                t.lr_steps
+            );
         }
         if self.data.resolution < 2 {
             bail!("data.resolution must be at least 2");
@@ -333,5 +371,28 @@ impl TrainConfig {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lr_steps_parse_apply_and_are_checked() {
+        let mut cfg: TrainConfig =
+            toml::from_str("[train]\nlr = 1e-3\nlr_steps = [[10, 0.3], [20, 0.1]]\n").unwrap();
+        let t = &cfg.train;
+        assert_eq!(t.lr_steps, vec![(10, 0.3), (20, 0.1)]);
+        assert_eq!(t.lr_at(0), 1e-3);
+        assert_eq!(t.lr_at(9), 1e-3);
+        assert!((t.lr_at(10) - 3e-4).abs() < 1e-12);
+        assert!((t.lr_at(19) - 3e-4).abs() < 1e-12);
+        assert!((t.lr_at(500) - 1e-4).abs() < 1e-12);
+        assert!(cfg.check().is_ok());
+        cfg.train.lr_steps = vec![(20, 0.3), (10, 0.1)];
+        assert!(cfg.check().unwrap_err().to_string().contains("lr_steps"));
+        cfg.train.lr_steps = vec![(10, 0.0)];
+        assert!(cfg.check().is_err());
     }
 }

@@ -20,6 +20,7 @@
 //!     device: ponq_model::backend::cpu(),
 //!     quiet: false,
 //!     kernels: ponq_model::Kernels::Fast,
+//!     extra_devices: Vec::new(),
 //! };
 //! let summary = train::run(&cfg, &opts).unwrap();
 //! println!("{} epochs", summary.epochs_done);
@@ -29,5 +30,6 @@ pub mod config;
 pub mod data;
 pub mod dataset;
 pub mod loss;
+pub mod parallel;
 pub mod plot;
 pub mod train;

@@ -24,6 +24,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::TrainConfig;
 use crate::data::{Batcher, Item, ItemOptions, Shape, item_frame, make_item, make_item_at};
 use crate::loss::{self, LossTerms};
+use crate::parallel::{BatchGradients, DeviceGroup, Parallel};
 
 /// How to run.
 #[derive(Debug, Clone)]
@@ -39,6 +40,10 @@ pub struct RunOptions {
     /// Layer implementation on the CPU (the fast kernels by default; the weights and the
     /// numbers are the same up to float rounding).
     pub kernels: ponq_model::Kernels,
+    /// More devices for data-parallel training: each batch is split across `device` and
+    /// these (see [`crate::parallel`]; needs a backend with collective operations: CUDA).
+    /// Empty: one device.
+    pub extra_devices: Vec<Device>,
 }
 
 /// What a run did.
@@ -375,6 +380,21 @@ pub fn run_with_shapes(
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
     let device = opts.device.clone().autodiff();
+    let mut parallel = if opts.extra_devices.is_empty() {
+        Parallel::MicroBatches(cfg.train.micro_batches)
+    } else {
+        if cfg.train.batch_size < 1 + opts.extra_devices.len() {
+            bail!(
+                "{} devices for a batch of {} shapes: each device needs at least one shape \
+                 (raise train.batch_size or use fewer devices)",
+                1 + opts.extra_devices.len(),
+                cfg.train.batch_size
+            );
+        }
+        let mut devices = vec![device.clone()];
+        devices.extend(opts.extra_devices.iter().map(|d| d.clone().autodiff()));
+        Parallel::Devices(DeviceGroup::new(devices)?)
+    };
     let net = cfg.model.net();
     let mut state = State {
         epochs_done: 0,
@@ -423,9 +443,6 @@ pub fn run_with_shapes(
         augment: cfg.train.augment,
     };
     let val_items = validation_items(val, &item_opts, cfg.train.seed);
-    let batcher = Batcher {
-        device: device.clone(),
-    };
     let frame = item_frame(cfg.data.resolution);
     let steps_per_epoch = train.len().div_ceil(cfg.train.batch_size);
     let mut summary = RunSummary {
@@ -467,15 +484,15 @@ pub fn run_with_shapes(
             } else {
                 item_frame(res)
             };
-            let out = model.forward(batcher.batch(&items)?, &batch_frame);
-            let l = loss::compute(&out, &items, &cfg.loss)?;
-            let mut grads = GradientsParams::from_grads(l.total.backward(), &model);
+            model = parallel.prepare(model);
+            let BatchGradients { mut grads, terms } =
+                parallel.gradients(&model, &items, &batch_frame, &cfg.loss)?;
             clip_global_norm(&model, &mut grads, cfg.train.grad_clip);
-            model = optim.step(cfg.train.lr, model, grads);
-            mean.add(&l.terms, 1.0 / steps_per_epoch as f64);
-            summary.step_losses.push(l.terms.total);
+            model = optim.step(cfg.train.lr_at(epoch), model, grads);
+            mean.add(&terms, 1.0 / steps_per_epoch as f64);
+            summary.step_losses.push(terms.total);
             state.steps_done += 1;
-            pb.set_prefix(format!("epoch {} loss {:.4}", epoch + 1, l.terms.total));
+            pb.set_prefix(format!("epoch {} loss {:.4}", epoch + 1, terms.total));
             pb.inc(1);
         }
         state.epochs_done = epoch + 1;
@@ -512,7 +529,7 @@ pub fn run_with_shapes(
             state.epochs_done.to_string(),
             state.steps_done.to_string(),
             format!("{:.1}", state.seconds),
-            format!("{:e}", cfg.train.lr),
+            format!("{:e}", cfg.train.lr_at(epoch)),
         ];
         row.extend(mean.values().iter().map(|v| format!("{v:.6e}")));
         match val_terms {

@@ -110,6 +110,7 @@ fn smoke_training_loss_falls() {
         device: backend::cpu(),
         quiet: true,
         kernels: ponq_model::Kernels::default(),
+        extra_devices: Vec::new(),
     };
     let s = run_with_shapes(&cfg, &train, &val, &opts).expect("training runs");
     assert_eq!(s.epochs_done, 20);
@@ -162,6 +163,7 @@ fn resume_repeats_the_uninterrupted_run() {
             device: dev.clone(),
             quiet: true,
             kernels: ponq_model::Kernels::default(),
+            extra_devices: Vec::new(),
         },
     )
     .unwrap();
@@ -178,6 +180,7 @@ fn resume_repeats_the_uninterrupted_run() {
             device: dev.clone(),
             quiet: true,
             kernels: ponq_model::Kernels::default(),
+            extra_devices: Vec::new(),
         },
     )
     .unwrap();
@@ -192,6 +195,7 @@ fn resume_repeats_the_uninterrupted_run() {
             device: dev,
             quiet: true,
             kernels: ponq_model::Kernels::default(),
+            extra_devices: Vec::new(),
         },
     )
     .unwrap();
@@ -271,6 +275,31 @@ fn cli_trains_the_smoke_config_and_rejects_bad_input() {
         .output()
         .unwrap();
     assert!(!o.status.success());
+    // Device lists: several CPU devices, several wgpu devices, repeated or invalid indices,
+    // more devices than shapes per batch, CUDA without the feature: exit 2, no panic.
+    for (args, expect) in [
+        (vec!["--devices", "0,1"], "--backend cuda"),
+        (vec!["--devices", "0,0"], "twice"),
+        (vec!["--devices", "zero"], "invalid device index"),
+        (vec!["--backend", "wgpu", "--devices", "0,1"], "collective"),
+        (
+            vec!["--backend", "cuda", "--devices", "0,1,2"],
+            "at least one",
+        ),
+        (vec!["--backend", "cuda"], "cuda"),
+    ] {
+        let o = std::process::Command::new(exe)
+            .current_dir(&root)
+            .args(["--config", "configs/smoke.toml", "-q", "--out"])
+            .arg(out.join("devices"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(expect), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
     std::fs::remove_dir_all(&out).ok();
 }
 
@@ -300,6 +329,7 @@ fn fast_and_stock_kernels_give_the_same_loss_curve() {
                 device: dev.clone(),
                 quiet: true,
                 kernels,
+                extra_devices: Vec::new(),
             },
         )
         .unwrap();
@@ -325,6 +355,98 @@ fn fast_and_stock_kernels_give_the_same_loss_curve() {
     std::fs::remove_dir_all(&init).ok();
 }
 
+/// Data parallelism's split: a batch cut into shards (3 shapes -> 2 + 1, the last batch of an
+/// epoch 1 shape) whose losses are weighted by their share of the batch and whose gradients
+/// are summed takes the same steps as the whole batch at once (the code path of several
+/// devices, run as micro-batches on one): the loss curves and the final weights agree.
+#[test]
+fn micro_batches_take_the_whole_batch_step() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 3;
+    cfg.train.batch_size = 3;
+    let (train, val) = shapes();
+    let dev = backend::cpu();
+    let init = tmp("micro-init");
+    std::fs::create_dir_all(&init).unwrap();
+    let init_file = init.join("init.bpk");
+    let net = cfg.model.net();
+    ponq_model::weights::save(&net.init(&dev), &net, &init_file).unwrap();
+    cfg.train.init_from = Some(init_file);
+    // All parameters, flattened.
+    struct Flat(Vec<f32>);
+    impl burn::module::ModuleVisitor for Flat {
+        fn visit_float<const D: usize>(
+            &mut self,
+            param: &burn::module::Param<burn::prelude::Tensor<D>>,
+        ) {
+            self.0.extend(
+                param
+                    .val()
+                    .into_data()
+                    .convert::<f32>()
+                    .try_to_vec::<f32>()
+                    .unwrap(),
+            );
+        }
+    }
+    let params = |m: &ponq_model::PonqNet| {
+        use burn::module::Module;
+        let mut f = Flat(Vec::new());
+        m.visit(&mut f);
+        f.0
+    };
+    let run = |micro: usize| {
+        let mut cfg = cfg.clone();
+        cfg.train.micro_batches = micro;
+        cfg.check().unwrap();
+        let out = tmp(&format!("micro-{micro}"));
+        let s = run_with_shapes(
+            &cfg,
+            &train,
+            &val,
+            &RunOptions {
+                out: out.clone(),
+                resume: false,
+                device: dev.clone(),
+                quiet: true,
+                kernels: ponq_model::Kernels::default(),
+                extra_devices: Vec::new(),
+            },
+        )
+        .unwrap();
+        let model = ponq_train::train::load_weights(&out.join("model.bpk"), &cfg, &dev).unwrap();
+        let flat = params(&model);
+        std::fs::remove_dir_all(&out).ok();
+        (s, flat)
+    };
+    let (whole, m1) = run(1);
+    let (split, m2) = run(2);
+    assert_eq!(whole.step_losses.len(), 6);
+    assert_eq!(whole.step_losses.len(), split.step_losses.len());
+    for (i, (x, y)) in whole.step_losses.iter().zip(&split.step_losses).enumerate() {
+        assert!((x - y).abs() <= 1e-4 * y.abs(), "step {i}: {x} vs {y}");
+    }
+    // The weights after six steps: the same within float rounding.
+    let (a, b) = (m1, m2);
+    assert_eq!(a.len(), b.len());
+    let diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0f32, f32::max);
+    assert!(diff < 1e-4, "weights differ by {diff}");
+    // Invalid counts are config errors.
+    let mut bad = cfg.clone();
+    bad.train.micro_batches = 4;
+    assert!(
+        bad.check()
+            .unwrap_err()
+            .to_string()
+            .contains("micro_batches")
+    );
+    std::fs::remove_dir_all(&init).ok();
+}
+
 /// A run whose data holds an id of its exclusion split stops before training, naming it.
 #[test]
 fn excluded_shapes_stop_the_run() {
@@ -339,6 +461,7 @@ fn excluded_shapes_stop_the_run() {
         device: backend::cpu(),
         quiet: true,
         kernels: ponq_model::Kernels::default(),
+        extra_devices: Vec::new(),
     };
     // Shape "c" (training) and then "v" (validation) are excluded.
     for (list, id) in [("zz\nc\n", "c"), ("v\n", "v")] {
@@ -380,6 +503,7 @@ fn extra_resolutions_are_trained_on() {
         device: backend::cpu(),
         quiet: true,
         kernels: ponq_model::Kernels::default(),
+        extra_devices: Vec::new(),
     };
     let err = run_with_shapes(&cfg, &train, &val, &opts)
         .expect_err("no shape has a 16^3 grid")

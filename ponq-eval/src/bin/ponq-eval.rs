@@ -217,6 +217,10 @@ struct RunArgs {
     /// Network weights [default: the shipped model].
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Compute backend of the network: flex (CPU, default), wgpu or cuda (with the cargo
+    /// feature of that name).
+    #[arg(long, default_value = "flex")]
+    backend: ponq_model::backend::BackendKind,
     /// Layer implementation of the network on the CPU: fast (custom kernels, default) or
     /// stock (Burn's Conv3d layers); same numbers up to float rounding.
     #[arg(long, default_value = "fast")]
@@ -230,6 +234,11 @@ struct RunArgs {
     /// Shapes evaluated in parallel [default: all cores].
     #[arg(long)]
     jobs: Option<usize>,
+    /// Name of this model's rows in the report (`PoNQ`; `<name>-lite` for PoNQ-lite): run
+    /// again into the same folder with another `--model`, `--name` and `--no-mc` to compare
+    /// models in one report.
+    #[arg(long, default_value = "PoNQ")]
+    name: String,
     /// Report folder.
     #[arg(short, long)]
     output: PathBuf,
@@ -254,7 +263,18 @@ fn run_split(a: RunArgs) -> Result<()> {
     if a.samples == 0 {
         bail!("--samples must be positive");
     }
-    let device = ponq_model::backend::cpu();
+    if a.name.is_empty()
+        || !a
+            .name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+    {
+        bail!(
+            "--name takes letters, digits, '-', '_' and '.', got {:?}",
+            a.name
+        );
+    }
+    let device = ponq_model::backend::device(a.backend).map_err(anyhow::Error::msg)?;
     let (net, cfg) = match &a.model {
         Some(p) => ponq_model::weights::load(p, &device)?,
         None => ponq_infer::shipped::load(&device)?,
@@ -278,6 +298,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         samples: a.samples,
         renders: a.renders,
         tile: 48,
+        name: a.name.clone(),
     };
     std::fs::create_dir_all(a.output.join("rows"))
         .with_context(|| format!("cannot create {}", a.output.display()))?;
@@ -301,7 +322,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         .par_iter()
         .filter_map(|&(i, r)| {
             let (id, path) = &shapes[i];
-            let rows_path = eval::rows_path(&a.output, id, r);
+            let rows_path = eval::rows_path(&a.output, id, r, &a.name);
             let result = if rows_path.is_file() {
                 Ok(())
             } else {
@@ -318,7 +339,16 @@ fn run_split(a: RunArgs) -> Result<()> {
                 )
                 .and_then(|(rows, image)| {
                     if let Some(im) = image {
-                        im.save_png(&a.output.join("renders").join(format!("{id}_{}.png", r + 1)))?;
+                        let suffix = if a.name == "PoNQ" {
+                            String::new()
+                        } else {
+                            format!("_{}", a.name)
+                        };
+                        im.save_png(
+                            &a.output
+                                .join("renders")
+                                .join(format!("{id}_{}{suffix}.png", r + 1)),
+                        )?;
                     }
                     eval::write_rows(&rows_path, &rows)
                 })
@@ -330,7 +360,11 @@ fn run_split(a: RunArgs) -> Result<()> {
         })
         .collect();
     pb.finish_and_clear();
-    let rows = eval::write_report(&a.output, &missing, &failed)?;
+    let groups: std::collections::BTreeMap<String, String> = shapes
+        .iter()
+        .map(|(id, path)| (id.clone(), eval::group_of(&a.data, path)))
+        .collect();
+    let rows = eval::write_report(&a.output, &missing, &failed, &groups)?;
     if !a.quiet {
         print!("{}", eval::summary_markdown(&rows));
         if !missing.is_empty() {

@@ -46,7 +46,8 @@ struct Args {
     /// The authors' PyTorch weights (`pretrained_PoNQ_ABC.pt`) instead of --model.
     #[arg(long, conflicts_with = "model")]
     authors_weights: Option<PathBuf>,
-    /// Compute backend: flex (CPU, default) or wgpu (GPU; needs the `wgpu` cargo feature).
+    /// Compute backend: flex (CPU, default), wgpu (GPU or a software Vulkan driver; needs the
+    /// `wgpu` cargo feature) or cuda (NVIDIA; needs the `cuda` cargo feature and a driver).
     #[arg(long, default_value = "flex")]
     backend: BackendKind,
     /// Box spanned by the grid nodes: xmin,ymin,zmin,xmax,ymax,zmax [default: -1,-1,-1,1,1,1].

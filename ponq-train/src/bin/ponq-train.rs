@@ -5,8 +5,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use ponq_model::backend::{BackendKind, device};
+use ponq_model::backend::{BackendKind, device_at};
 use ponq_train::config::TrainConfig;
+use ponq_train::parallel::{check_devices, parse_devices};
 use ponq_train::train::{RunOptions, run};
 
 /// Train the PoNQ network (SDF grid -> per-cell points, normals, quadrics, occupancy).
@@ -27,9 +28,16 @@ struct Args {
     /// Continue from OUT/checkpoint (exactly: same shapes, crops and optimizer state).
     #[arg(long)]
     resume: bool,
-    /// Compute backend: flex (CPU, default) or wgpu (GPU; needs the `wgpu` cargo feature).
+    /// Compute backend: flex (CPU, default), wgpu (GPU or a software Vulkan driver; needs the
+    /// `wgpu` cargo feature) or cuda (NVIDIA; needs the `cuda` cargo feature and a driver).
     #[arg(long, default_value = "flex")]
     backend: BackendKind,
+    /// GPUs to train on together, as indices (`0,1,2,3`): each batch (train.batch_size
+    /// shapes) is split across them and their gradients are summed (Burn's distributed data
+    /// parallelism, NCCL); the learning rate and the checkpoints are those of one device, so a
+    /// run may resume with another device count. Several devices need `--backend cuda`.
+    #[arg(long, default_value = "0")]
+    devices: String,
     /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
     /// Conv3d layers). Same weights, same numbers up to float rounding; GPU backends always
     /// use the stock layers.
@@ -83,13 +91,20 @@ fn real_main() -> Result<()> {
             .unwrap_or_else(|| "run".into());
         PathBuf::from("runs").join(stem)
     });
-    let device = device(args.backend).map_err(anyhow::Error::msg)?;
+    let indices = parse_devices(&args.devices)?;
+    check_devices(args.backend, &indices, cfg.train.batch_size)?;
+    let mut devices = indices
+        .iter()
+        .map(|&i| device_at(args.backend, i).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()?;
+    let device = devices.remove(0);
     let opts = RunOptions {
         out: out.clone(),
         resume: args.resume,
         device,
         quiet: args.quiet,
         kernels: args.kernels,
+        extra_devices: devices,
     };
     let s = run(&cfg, &opts)?;
     if !args.quiet {

@@ -1,5 +1,5 @@
 //! Training on the `wgpu` backend: a few epochs of `configs/smoke.toml` give the same losses as
-//! on the CPU, and a checkpoint written on the CPU resumes on the GPU (and the other way). See
+//! on the CPU, and a checkpoint written on the CPU resumes on the GPU. See
 //! `ponq-model/tests/wgpu_backend.rs` for how the adapter is found (lavapipe in CI).
 #![cfg(feature = "wgpu")]
 

@@ -148,16 +148,7 @@ pub fn read_shape_with(
 
 /// Reads one shape file.
 pub fn read_shape(path: &Path, res: usize, max_samples: usize) -> Result<Shape> {
-    let id = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let rec = match path.extension().and_then(|e| e.to_str()) {
-        Some("hdf5" | "h5") => ponq_data::hdf5::read_authors_h5(path),
-        _ => ShapeRecord::read(path),
-    }
-    .with_context(|| format!("cannot read shape {}", path.display()))?;
-    Shape::from_record(id, rec, res, max_samples)
+    read_shape_with(path, res, &[], max_samples)
 }
 
 /// A signed permutation of the axes: new coordinate `a` is `sign[a] * old[perm[a]]`.

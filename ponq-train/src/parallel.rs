@@ -280,16 +280,6 @@ impl DeviceGroup {
         })
     }
 
-    /// The number of devices.
-    pub fn len(&self) -> usize {
-        self.devices.len()
-    }
-
-    /// Always false (a group has at least two devices).
-    pub fn is_empty(&self) -> bool {
-        self.devices.is_empty()
-    }
-
     fn gradients(
         &mut self,
         model: &PonqNet,

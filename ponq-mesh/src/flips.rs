@@ -21,12 +21,12 @@
 //! without the quadrilaterals involved (and, as a last resort, the surface is left as it was).
 //! The pass is sequential and deterministic.
 
-use std::collections::HashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::TriMesh;
 use crate::quadric::Quadric;
 use crate::score::NORMAL_SCALE;
-use crate::validity::intersecting_face_pairs;
+use crate::validity::intersecting_face_pairs_among;
 
 /// What [`align_creases`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -108,14 +108,29 @@ fn key(a: u32, b: u32) -> (u32, u32) {
     (a.min(b), a.max(b))
 }
 
-/// Faces of every undirected edge (two on a closed manifold surface).
-fn edge_faces(mesh: &TriMesh) -> HashMap<(u32, u32), Vec<u32>> {
-    let mut m: HashMap<(u32, u32), Vec<u32>> = HashMap::with_capacity(mesh.faces.len() * 3 / 2);
+/// The faces of one undirected edge: the first two, and how many there are (two on a closed
+/// manifold surface; any other count leaves the edge alone).
+#[derive(Debug, Clone, Copy)]
+struct EdgeFaces {
+    faces: [u32; 2],
+    count: u32,
+}
+
+/// Faces of every undirected edge. A fast (Fx) hash: the keys are vertex pairs of our own
+/// mesh, not adversarial input, and the map is probed a few times per edge and pass.
+fn edge_faces(mesh: &TriMesh) -> FxHashMap<(u32, u32), EdgeFaces> {
+    let mut m: FxHashMap<(u32, u32), EdgeFaces> =
+        FxHashMap::with_capacity_and_hasher(mesh.faces.len() * 3 / 2, Default::default());
     for (fi, f) in mesh.faces.iter().enumerate() {
         for k in 0..3 {
-            m.entry(key(f[k], f[(k + 1) % 3]))
-                .or_default()
-                .push(fi as u32);
+            let e = m.entry(key(f[k], f[(k + 1) % 3])).or_insert(EdgeFaces {
+                faces: [u32::MAX; 2],
+                count: 0,
+            });
+            if e.count < 2 {
+                e.faces[e.count as usize] = fi as u32;
+            }
+            e.count += 1;
         }
     }
     m
@@ -139,13 +154,13 @@ fn flip_pass(
     quadrics: &[Quadric],
     normals: &[[f64; 3]],
     h: f64,
-    banned: &std::collections::HashSet<(u32, u32)>,
+    banned: &FxHashSet<(u32, u32)>,
     stats: &mut FlipStats,
 ) -> Vec<(u32, u32)> {
     let mut edges = edge_faces(mesh);
     let mut degree = vec![0u32; mesh.vertices.len()];
     for (&(a, b), fs) in &edges {
-        if fs.len() == 2 {
+        if fs.count == 2 {
             degree[a as usize] += 1;
             degree[b as usize] += 1;
         }
@@ -165,10 +180,10 @@ fn flip_pass(
                 continue;
             }
             let Some(fs) = edges.get(&e) else { continue };
-            if fs.len() != 2 {
+            if fs.count != 2 {
                 continue;
             }
-            let (fa, fb) = (fs[0] as usize, fs[1] as usize);
+            let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
             let (u, v) = e;
             // f1 = (u, v, a) and f2 = (v, u, b), whichever face holds the directed edge u->v.
             let (mut f1, mut f2) = (
@@ -193,21 +208,11 @@ fn flip_pass(
                 continue;
             }
             let (g1, g2) = ([b, v, a], [a, u, b]);
-            let (Some(s1), Some(s2)) = (
-                score(mesh, quadrics, normals, h, f1),
-                score(mesh, quadrics, normals, h, f2),
-            ) else {
-                continue;
-            };
-            let (Some(t1), Some(t2)) = (
-                score(mesh, quadrics, normals, h, g1),
-                score(mesh, quadrics, normals, h, g2),
-            ) else {
-                continue;
-            };
             // A flip must at least halve the quadric error of the diagonal (the four vertices'
             // quadrics at its midpoint: zero on a crease line, positive on a diagonal that cuts
-            // across it), by more than noise, and lower the whole face score.
+            // across it), by more than noise, and lower the whole face score. The quadric test
+            // comes first: it is cheap and rejects almost every edge (flat regions), so the
+            // face scores (three `acos` each) are computed for the few candidates only.
             let mid = |x: u32, y: u32| {
                 let (p, q) = (mesh.vertices[x as usize], mesh.vertices[y as usize]);
                 [
@@ -223,22 +228,41 @@ fn flip_pass(
                     .sum()
             };
             let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
+            if !(e_new < QUADRIC_FACTOR * e_old && e_old > noise) {
+                continue;
+            }
+            let (Some(s1), Some(s2)) = (
+                score(mesh, quadrics, normals, h, f1),
+                score(mesh, quadrics, normals, h, f2),
+            ) else {
+                continue;
+            };
+            let (Some(t1), Some(t2)) = (
+                score(mesh, quadrics, normals, h, g1),
+                score(mesh, quadrics, normals, h, g2),
+            ) else {
+                continue;
+            };
             let (before, after) = (s1.0 + s2.0 + s1.1 + s2.1, t1.0 + t2.0 + t1.1 + t2.1);
-            if !(e_new < QUADRIC_FACTOR * e_old
-                && e_old > noise
-                && after < before - MIN_GAIN * before.abs())
-            {
+            if !(after < before - MIN_GAIN * before.abs()) {
                 continue;
             }
             // Flip: update faces, edge map and degrees.
             mesh.faces[i1] = g1;
             mesh.faces[i2] = g2;
             edges.remove(&e);
-            edges.insert(key(a, b), vec![i1 as u32, i2 as u32]);
+            edges.insert(
+                key(a, b),
+                EdgeFaces {
+                    faces: [i1 as u32, i2 as u32],
+                    count: 2,
+                },
+            );
             // The four outer edges change faces: v-a and b-v are in g1, a-u and u-b in g2.
             for (x, y, fnew) in [(v, a, i1), (b, v, i1), (a, u, i2), (u, b, i2)] {
                 if let Some(list) = edges.get_mut(&key(x, y)) {
-                    for f in list.iter_mut() {
+                    let n = (list.count as usize).min(2);
+                    for f in list.faces[..n].iter_mut() {
                         if *f as usize == i1 || *f as usize == i2 {
                             *f = fnew as u32;
                         }
@@ -274,7 +298,7 @@ pub fn align_creases(
         return stats;
     }
     let original = mesh.faces.clone();
-    let mut banned = std::collections::HashSet::new();
+    let mut banned = FxHashSet::default();
     for attempt in 1..=MAX_ATTEMPTS {
         stats.attempts = attempt;
         mesh.faces.clone_from(&original);
@@ -283,12 +307,12 @@ pub fn align_creases(
         if flipped.is_empty() {
             return stats;
         }
-        let touched: std::collections::HashSet<u32> =
-            flipped.iter().flat_map(|&(a, b)| [a, b]).collect();
-        let bad: Vec<(usize, usize)> = intersecting_face_pairs(mesh)
-            .into_iter()
-            .filter(|&(i, j)| touched.contains(&(i as u32)) || touched.contains(&(j as u32)))
-            .collect();
+        let touched: FxHashSet<u32> = flipped.iter().flat_map(|&(a, b)| [a, b]).collect();
+        // The surface had no self-intersection before: only pairs with a flipped face can
+        // intersect now, so only those are tested.
+        let mut touched_list: Vec<usize> = touched.iter().map(|&f| f as usize).collect();
+        touched_list.sort_unstable();
+        let bad = intersecting_face_pairs_among(mesh, &touched_list);
         if bad.is_empty() {
             return stats;
         }

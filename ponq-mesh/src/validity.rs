@@ -354,6 +354,56 @@ pub fn intersecting_face_pairs(mesh: &TriMesh) -> Vec<(usize, usize)> {
     v
 }
 
+/// The intersecting face pairs `(i, j)`, `i < j`, sorted, that involve at least one face of
+/// `faces`: the pairs of [`intersecting_face_pairs`] with `i` or `j` in `faces`, found by
+/// testing every face against a bounding-volume hierarchy of `faces` only (cheap when
+/// `faces` is a small part of the mesh, e.g. the faces a local edit changed).
+///
+/// # Panics
+/// If an index of `faces` is out of range.
+pub fn intersecting_face_pairs_among(mesh: &TriMesh, faces: &[usize]) -> Vec<(usize, usize)> {
+    if faces.is_empty() || mesh.faces.len() < 2 {
+        return Vec::new();
+    }
+    let boxes: Vec<Aabb> = faces
+        .iter()
+        .map(|&f| Aabb::from_points(&mesh.triangle(f)))
+        .collect();
+    let info: Vec<u8> = faces.iter().map(|&f| face_info(mesh, f)).collect();
+    let bvh = Bvh::build(&boxes);
+    let mut v: Vec<(usize, usize)> = (0..mesh.faces.len())
+        .into_par_iter()
+        .fold(Vec::new, |mut acc, f| {
+            let b = Aabb::from_points(&mesh.triangle(f));
+            let mut fi = None;
+            bvh.query_overlaps(&b, |k| {
+                let g = faces[k];
+                if g == f {
+                    return;
+                }
+                let fi = *fi.get_or_insert_with(|| face_info(mesh, f));
+                if pair_rule(
+                    mesh.faces[f],
+                    mesh.triangle(f),
+                    fi,
+                    mesh.faces[g],
+                    mesh.triangle(g),
+                    info[k],
+                ) {
+                    acc.push((f.min(g), f.max(g)));
+                }
+            });
+            acc
+        })
+        .reduce(Vec::new, |mut a, mut b| {
+            a.append(&mut b);
+            a
+        });
+    v.sort_unstable();
+    v.dedup();
+    v
+}
+
 /// Whether faces `i != j` of `mesh` intersect under the rules of the [module docs](self)
 /// (which take shared vertex indices into account). Exact.
 ///

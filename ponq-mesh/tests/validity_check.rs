@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use ponq_mesh::TriMesh;
 use ponq_mesh::validity::{
     ValidityReport, check, check_topology, faces_intersect, intersecting_face_pairs,
-    triangles_intersect,
+    intersecting_face_pairs_among, triangles_intersect,
 };
 use ponq_mesh::vec3::{cross, dot, sub};
 use proptest::prelude::*;
@@ -242,6 +242,42 @@ fn interpenetrating_cubes() {
         assert!(faces_intersect(&m, i, j) && faces_intersect(&m, j, i));
     }
     assert!(check_topology(&m).is_valid());
+}
+
+/// The pairs found from a subset of faces are exactly the full list's pairs that involve the
+/// subset, for subsets on both cubes, on one, of one face, with repeats, and empty.
+#[test]
+fn intersecting_pairs_among_a_subset_match_the_full_list() {
+    let a = cube(3, [0., 0., 0.], 1.0);
+    let b = cube(2, [0.5, 0.3, 0.2], 1.0);
+    let m = union(&a, &b, false);
+    let all = intersecting_face_pairs(&m);
+    assert!(!all.is_empty());
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let n = m.faces.len();
+    let mut subsets: Vec<Vec<usize>> = vec![
+        Vec::new(),
+        (0..n).collect(),
+        (0..a.faces.len()).collect(),
+        vec![all[0].0],
+        vec![all[0].1, all[0].1, all[0].0],
+    ];
+    for _ in 0..20 {
+        let k = rng.random_range(1..n);
+        subsets.push((0..k).map(|_| rng.random_range(0..n)).collect());
+    }
+    for sub in subsets {
+        let expect: Vec<(usize, usize)> = all
+            .iter()
+            .copied()
+            .filter(|&(i, j)| sub.contains(&i) || sub.contains(&j))
+            .collect();
+        assert_eq!(
+            intersecting_face_pairs_among(&m, &sub),
+            expect,
+            "subset {sub:?}"
+        );
+    }
 }
 
 #[test]

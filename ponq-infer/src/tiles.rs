@@ -10,9 +10,11 @@ use crate::frame::Frame;
 /// Runs the network over `grid` (normalised values, already scaled for the network) in
 /// tiles; returns the prediction over all cells and the number of tiles run.
 ///
-/// With `needed` (one flag per cell, C order), a tile whose kept core holds no needed cell is
-/// not run and its cells keep a zero prediction (occupancy 0): the prediction of every needed
-/// cell is unchanged. Inference passes the cells near the surface (the only ones it can keep).
+/// With `needed` (one flag per cell, C order), only the needed cells get a prediction: a tile
+/// whose kept core holds no needed cell is not run, and in the others the decoders run on
+/// the needed cells only ([`PonqNet::forward_cells`]); the other cells keep a zero prediction
+/// (occupancy 0), the needed ones get the values of one pass over the whole grid.
+/// Inference passes the cells near the surface (the only ones it can keep).
 // Grid, network, tiling and device are independent inputs; a struct would only rename them.
 #[allow(clippy::too_many_arguments)]
 pub fn predict_tiled(
@@ -81,14 +83,33 @@ pub fn predict_tiled(
             .reshape([1, 1, m[0], m[1], m[2]]);
         let mut gf = GridFrame::crop(frame.n, lo);
         gf.authors_cell_base = authors_cell_base;
-        let out = net.forward(x, &gf);
-        let t = Prediction::from_output(&out, 0)?;
-        pred.paste(
-            &t,
-            std::array::from_fn(|a| core[a].0 - lo[a]),
-            std::array::from_fn(|a| core[a].1 - lo[a]),
-            lo,
-        )?;
+        if let Some(n) = needed {
+            // Decoders only on the needed cells of the core (the encoder runs on the tile).
+            let tc: [usize; 3] = std::array::from_fn(|a| m[a] - 1);
+            let (mut local, mut global) = (Vec::new(), Vec::new());
+            for i in core[0].0..core[0].1 {
+                for j in core[1].0..core[1].1 {
+                    for k in core[2].0..core[2].1 {
+                        let g = (i * cells[1] + j) * cells[2] + k;
+                        if n[g] {
+                            local.push(((i - lo[0]) * tc[1] + (j - lo[1])) * tc[2] + (k - lo[2]));
+                            global.push(g);
+                        }
+                    }
+                }
+            }
+            let out = net.forward_cells(x, &gf, &local)?;
+            pred.scatter(&Prediction::from_output(&out, 0)?, &global)?;
+        } else {
+            let out = net.forward(x, &gf);
+            let t = Prediction::from_output(&out, 0)?;
+            pred.paste(
+                &t,
+                std::array::from_fn(|a| core[a].0 - lo[a]),
+                std::array::from_fn(|a| core[a].1 - lo[a]),
+                lo,
+            )?;
+        }
         progress(done + 1, total);
     }
     Ok((pred, total))

@@ -287,17 +287,7 @@ impl PonqNet {
             let f = self.encode_fast(sdf);
             let [batch, n1, n2, n3, w] = f.dims();
             let rows = f.reshape([batch * n1 * n2 * n3, w]);
-            let d = |dec: &Decoder, dim| dec.forward_fast(rows.clone(), batch, dim);
-            return (
-                [
-                    d(&self.decoder_points, 3),
-                    d(&self.decoder_vstars, 3),
-                    d(&self.decoder_normals, 3),
-                    d(&self.decoder_cholesky, 6),
-                    d(&self.decoder_occupancy, 1),
-                ],
-                [n1, n2, n3],
-            );
+            return (self.decode_rows(rows, batch), [n1, n2, n3]);
         }
         let f = self.encode(sdf);
         let [_, _, n1, n2, n3] = f.dims();
@@ -312,6 +302,92 @@ impl PonqNet {
             ],
             [n1, n2, n3],
         )
+    }
+
+    /// The five decoders on channels-last feature rows `[batch * cells, W]` (fast kernels).
+    fn decode_rows(&self, rows: Tensor<2>, batch: usize) -> [Tensor<4>; 5] {
+        let d = |dec: &Decoder, dim| dec.forward_fast(rows.clone(), batch, dim);
+        [
+            d(&self.decoder_points, 3),
+            d(&self.decoder_vstars, 3),
+            d(&self.decoder_normals, 3),
+            d(&self.decoder_cholesky, 6),
+            d(&self.decoder_occupancy, 1),
+        ]
+    }
+
+    /// [`PonqNet::forward`] on one grid `[1, 1, n1+1, n2+1, n3+1]`, at the listed cells only
+    /// (C-order indices into its `n1 x n2 x n3` cells, any order, repeats allowed): the
+    /// encoder runs on the whole grid (every cell's features need their neighbourhood), the
+    /// five decoders only on the listed cells' features. Inference keeps only the cells near
+    /// the surface, a small part of a grid, so this skips most of the decoders' work. The
+    /// values are those of [`PonqNet::forward`] at the same cells (up to float rounding:
+    /// the same kernels on fewer rows).
+    ///
+    /// The output's cell axis runs over the listed cells in order: its tensors are
+    /// `[1, k, P, dim]` and `[1, k]` for `k = cells.len()`, and its `cells` field is
+    /// `[k, 1, 1]`.
+    ///
+    /// # Errors
+    /// A batch other than 1, an empty list or a cell index outside the grid.
+    pub fn forward_cells(
+        &self,
+        sdf: Tensor<5>,
+        frame: &GridFrame,
+        cells: &[usize],
+    ) -> crate::Result<PonqOutput> {
+        let device = sdf.device();
+        let [batch, _, d1, d2, d3] = sdf.dims();
+        if batch != 1 {
+            return Err(crate::ModelError::Invalid(format!(
+                "forward_cells takes one grid, got a batch of {batch}"
+            )));
+        }
+        let dims = [d1, d2, d3].map(|d| d.saturating_sub(1));
+        let total: usize = dims.iter().product();
+        if cells.is_empty() {
+            return Err(crate::ModelError::Invalid(
+                "forward_cells: no cell listed".into(),
+            ));
+        }
+        if let Some(&c) = cells.iter().find(|&&c| c >= total) {
+            return Err(crate::ModelError::Invalid(format!(
+                "cell {c} is outside the grid of {dims:?} cells"
+            )));
+        }
+        let k = cells.len();
+        let idx = Tensor::<1, Int>::from_data(
+            TensorData::new(cells.iter().map(|&c| c as i64).collect::<Vec<_>>(), [k]),
+            &device,
+        );
+        let [points, vstars, normals, cholesky, occupancy] = if self.uses_fast_kernels(&device) {
+            let f = self.encode_fast(sdf);
+            let [_, n1, n2, n3, w] = f.dims();
+            let rows = f.reshape([n1 * n2 * n3, w]).select(0, idx.clone());
+            self.decode_rows(rows, 1)
+        } else {
+            let (out, _) = self.decode(sdf);
+            out.map(|t| t.select(1, idx.clone()))
+        };
+        let bases_all = frame.cell_bases(dims);
+        let bases: Vec<f32> = cells
+            .iter()
+            .flat_map(|&c| bases_all[3 * c..3 * c + 3].iter().copied())
+            .collect();
+        let bases =
+            Tensor::<1>::from_data(TensorData::new(bases, [k * 3]), &device).reshape([1, k, 1, 3]);
+        let scale = frame.offset_scale as f32;
+        let points = points.mul_scalar(scale) + bases;
+        let vstars = vstars.mul_scalar(scale) + points.clone().detach();
+        let occupancy = sigmoid(occupancy).reshape([1, k]);
+        Ok(PonqOutput {
+            points,
+            vstars,
+            normals,
+            cholesky,
+            occupancy,
+            cells: [k, 1, 1],
+        })
     }
 
     /// Runs the network on `[B, 1, n1+1, n2+1, n3+1]` SDF grids (already scaled, see

@@ -128,6 +128,43 @@ impl Prediction {
         Ok(())
     }
 
+    /// Copies cell `i` of `part` (a prediction over a list of cells, e.g. from
+    /// [`crate::PonqNet::forward_cells`]) to cell `dst[i]` (C order) of this prediction.
+    ///
+    /// # Errors
+    /// Another `P`, `dst` not one index per cell of `part`, or an index outside the grid.
+    pub fn scatter(&mut self, part: &Prediction, dst: &[usize]) -> Result<()> {
+        if part.points_per_cell != self.points_per_cell {
+            return Err(ModelError::Invalid("part with another P".into()));
+        }
+        if dst.len() != part.num_cells() {
+            return Err(ModelError::Invalid(format!(
+                "{} destinations for {} cells",
+                dst.len(),
+                part.num_cells()
+            )));
+        }
+        let n = self.num_cells();
+        if let Some(&d) = dst.iter().find(|&&d| d >= n) {
+            return Err(ModelError::Invalid(format!(
+                "cell {d} outside the grid {:?}",
+                self.cells
+            )));
+        }
+        let p = self.points_per_cell;
+        for (src, &dst) in dst.iter().enumerate() {
+            let copy = |d: &mut Vec<f32>, s: &Vec<f32>, w: usize| {
+                d[dst * w..(dst + 1) * w].copy_from_slice(&s[src * w..(src + 1) * w]);
+            };
+            copy(&mut self.points, &part.points, 3 * p);
+            copy(&mut self.vstars, &part.vstars, 3 * p);
+            copy(&mut self.normals, &part.normals, 3 * p);
+            copy(&mut self.cholesky, &part.cholesky, 6 * p);
+            copy(&mut self.occupancy, &part.occupancy, 1);
+        }
+        Ok(())
+    }
+
     /// Cells kept for meshing: occupancy above `threshold` and, when given, `close[c]`.
     pub fn kept_cells(&self, threshold: f32, close: Option<&[bool]>) -> Result<Vec<usize>> {
         if let Some(m) = close {

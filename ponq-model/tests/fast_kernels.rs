@@ -197,3 +197,56 @@ fn inference_without_autodiff_equals_stock() {
     let se = values(net.with_kernels(Kernels::Stock).encode(x));
     assert!(rel_diff(&fe, &se) < 1e-5);
 }
+
+/// `forward_cells` (decoders on listed cells only) gives `forward`'s values at those cells,
+/// with the fast and the stock layers, for cells in any order with repeats, on a crop; and
+/// rejects a batch, an empty list and a cell outside the grid.
+#[test]
+fn forward_cells_equals_forward_at_those_cells() {
+    let d = backend::cpu();
+    let net = PonqNetConfig::new()
+        .with_width(16)
+        .with_points_per_cell(4)
+        .with_encoder_layers(2)
+        .with_decoder_blocks(2)
+        .init(&d);
+    let x = tensor(random(9 * 8 * 7, 11), [1, 1, 9, 8, 7], &d);
+    let frame = GridFrame::crop(20, [3, 1, 4]);
+    let cells: Vec<usize> = vec![0, 5, 17, 17, 100, 8 * 7 * 6 - 1, 33];
+    for kernels in [Kernels::Fast, Kernels::Stock] {
+        let net = net.clone().with_kernels(kernels);
+        let full = net.forward(x.clone(), &frame);
+        let part = net.forward_cells(x.clone(), &frame, &cells).unwrap();
+        assert_eq!(part.cells, [cells.len(), 1, 1]);
+        let [_, c, p, _] = full.points.dims();
+        assert_eq!(c, 8 * 7 * 6);
+        let pick = |t: Tensor<4>, w: usize| -> Vec<f32> {
+            let v = values(t);
+            cells
+                .iter()
+                .flat_map(|&c| v[c * p * w..(c + 1) * p * w].to_vec())
+                .collect()
+        };
+        for (name, a, b) in [
+            ("points", values(part.points), pick(full.points, 3)),
+            ("vstars", values(part.vstars), pick(full.vstars, 3)),
+            ("normals", values(part.normals), pick(full.normals, 3)),
+            ("cholesky", values(part.cholesky), pick(full.cholesky, 6)),
+        ] {
+            assert!(rel_diff(&a, &b) < 1e-5, "{kernels:?} {name}");
+        }
+        let occ = values(full.occupancy);
+        let want: Vec<f32> = cells.iter().map(|&c| occ[c]).collect();
+        assert!(rel_diff(&values(part.occupancy), &want) < 1e-5);
+    }
+    let x2 = tensor(random(2 * 9 * 8 * 7, 12), [2, 1, 9, 8, 7], &d);
+    assert!(net.forward_cells(x2, &frame, &[0]).is_err(), "batch of 2");
+    assert!(
+        net.forward_cells(x.clone(), &frame, &[]).is_err(),
+        "no cell"
+    );
+    assert!(
+        net.forward_cells(x, &frame, &[8 * 7 * 6]).is_err(),
+        "cell outside"
+    );
+}

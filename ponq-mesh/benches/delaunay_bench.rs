@@ -1,11 +1,22 @@
-//! Delaunay benchmark: random points in a cube and exact lattices (all co-spherical).
-//! `cargo bench -p ponq-mesh --bench delaunay_bench` (one worker, then one per rayon thread;
-//! `RAYON_NUM_THREADS` sets how many).
+//! Delaunay benchmark: random points in a cube, exact lattices (all co-spherical) and the v*
+//! of a real PoNQ (the shipped example's PoNQ at 64^3, if present).
+//!
+//! ```sh
+//! cargo bench -p ponq-mesh --bench delaunay_bench                     # the built-in sets
+//! cargo bench -p ponq-mesh --bench delaunay_bench -- --write DIR      # also write them as DIR/*.f64
+//! cargo bench -p ponq-mesh --bench delaunay_bench -- A.f64 B.f64      # point files instead
+//! ponq-mesh/benches/cgal/side_by_side.sh                              # the same points in CGAL
+//! ```
+//!
+//! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5.
+//! A point file is raw little-endian `f64` x, y, z triples (what `--write` writes and
+//! `benches/cgal/delaunay_cgal.cpp` reads).
 
 use ponq_mesh::delaunay::Delaunay;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-fn main() {
+fn built_in_sets() -> Vec<(String, Vec<[f64; 3]>)> {
     let mut s = 1u64;
     let mut r = || {
         s ^= s << 13;
@@ -13,12 +24,94 @@ fn main() {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
+    let mut sets = Vec::new();
+    for n in [10_000usize, 100_000, 400_000] {
+        let pts: Vec<[f64; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
+        sets.push((format!("random_{n}"), pts));
+    }
+    for m in [30usize, 47] {
+        let mut pts = Vec::new();
+        for i in 0..m {
+            for j in 0..m {
+                for k in 0..m {
+                    pts.push([i as f64 * 0.1, j as f64 * 0.1, k as f64 * 0.1]);
+                }
+            }
+        }
+        sets.push((format!("lattice_{}", pts.len()), pts));
+    }
+    let ponq = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/example001_ponq_64.npz");
+    match ponq_mesh::io::npz::read_ponq(&ponq) {
+        Ok(p) => {
+            let v = p.vstars();
+            sets.push((format!("ponq_example001_64_{}", v.len()), v));
+        }
+        Err(e) => eprintln!("skipping the PoNQ set ({}): {e}", ponq.display()),
+    }
+    sets
+}
+
+fn read_points(path: &Path) -> Vec<[f64; 3]> {
+    let bytes = std::fs::read(path)
+        .unwrap_or_else(|e| panic!("cannot read point file {}: {e}", path.display()));
+    assert!(
+        bytes.len() % 24 == 0,
+        "{}: not a whole number of f64 triples",
+        path.display()
+    );
+    bytes
+        .chunks_exact(24)
+        .map(|c| {
+            std::array::from_fn(|k| {
+                f64::from_le_bytes(c[8 * k..8 * k + 8].try_into().expect("8 bytes"))
+            })
+        })
+        .collect()
+}
+
+fn write_points(path: &Path, pts: &[[f64; 3]]) {
+    let bytes: Vec<u8> = pts
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()))
+        .collect();
+    std::fs::write(path, bytes).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
+    let mut write_dir: Option<PathBuf> = None;
+    let mut files = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--write" {
+            write_dir = it.next().map(PathBuf::from);
+        } else {
+            files.push(PathBuf::from(a));
+        }
+    }
+    let sets: Vec<(String, Vec<[f64; 3]>)> = if files.is_empty() {
+        built_in_sets()
+    } else {
+        files
+            .iter()
+            .map(|f| (f.display().to_string(), read_points(f)))
+            .collect()
+    };
+    if let Some(dir) = &write_dir {
+        std::fs::create_dir_all(dir).expect("create the --write folder");
+        for (name, pts) in &sets {
+            write_points(&dir.join(format!("{name}.f64")), pts);
+        }
+    }
     let threads = rayon::current_num_threads();
     println!(
         "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | deferred |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|");
-    let row = |name: &str, pts: &[[f64; 3]]| {
+    for (name, pts) in &sets {
         let time = |workers: usize| {
             let mut best = f64::MAX;
             let mut tets = 0;
@@ -42,20 +135,5 @@ fn main() {
             all * 1e3,
             all * 1e6 / pts.len() as f64,
         );
-    };
-    for n in [10_000usize, 100_000, 400_000] {
-        let pts: Vec<[f64; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
-        row("random in a cube", &pts);
-    }
-    for m in [30usize, 47] {
-        let mut pts = Vec::new();
-        for i in 0..m {
-            for j in 0..m {
-                for k in 0..m {
-                    pts.push([i as f64 * 0.1, j as f64 * 0.1, k as f64 * 0.1]);
-                }
-            }
-        }
-        row("lattice (co-spherical)", &pts);
     }
 }

@@ -225,11 +225,7 @@ impl<'a> FlipState<'a> {
             return None; // inconsistent orientation: leave it
         }
         let (a, b) = (f1[2], f2[2]);
-        if a == b
-            || self.edges.contains_key(&key(a, b))
-            || self.degree[u as usize] <= 3
-            || self.degree[v as usize] <= 3
-        {
+        if a == b || self.degree[u as usize] <= 3 || self.degree[v as usize] <= 3 {
             return None;
         }
         let (g1, g2) = ([b, v, a], [a, u, b]);
@@ -253,7 +249,11 @@ impl<'a> FlipState<'a> {
                 .sum()
         };
         let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
-        if !(e_new < QUADRIC_FACTOR * e_old && e_old > self.noise) {
+        // The new edge must not exist (a hash probe: after the quadric test, which rejects
+        // most edges).
+        if !(e_new < QUADRIC_FACTOR * e_old && e_old > self.noise)
+            || self.edges.contains_key(&key(a, b))
+        {
             return None;
         }
         let s1 = score(mesh, quadrics, normals, h, f1)?;

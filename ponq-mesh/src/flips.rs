@@ -198,6 +198,57 @@ impl<'a> FlipState<'a> {
         }
     }
 
+    /// False when [`FlipState::try_flip`] would certainly reject `e` whatever the degrees
+    /// and the other edges are: a banned or non-manifold edge, inconsistent orientation, or
+    /// a failed quadric test. It depends on the faces of `e` only (and on static data), so it
+    /// holds until a flip changes those faces. Read-only: run on many edges in parallel.
+    fn may_flip(&self, mesh: &TriMesh, e: (u32, u32)) -> bool {
+        if self.banned.contains(&e) {
+            return false;
+        }
+        let Some(fs) = self.edges.get(&e) else {
+            return false;
+        };
+        if fs.count != 2 {
+            return false;
+        }
+        let (u, v) = e;
+        let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
+        let (mut f1, mut f2) = (
+            starting_at(mesh.faces[fa], u),
+            starting_at(mesh.faces[fb], v),
+        );
+        if f1[1] != v {
+            f1 = starting_at(mesh.faces[fb], u);
+            f2 = starting_at(mesh.faces[fa], v);
+        }
+        if f1[1] != v || f2[1] != u {
+            return false;
+        }
+        let (a, b) = (f1[2], f2[2]);
+        a != b && self.quadric_test(mesh, [u, v, a, b])
+    }
+
+    /// The quadric test of a flip of `u v` to `a b` (see [`FlipState::try_flip`]).
+    fn quadric_test(&self, mesh: &TriMesh, [u, v, a, b]: [u32; 4]) -> bool {
+        let mid = |x: u32, y: u32| {
+            let (p, q) = (mesh.vertices[x as usize], mesh.vertices[y as usize]);
+            [
+                0.5 * (p[0] + q[0]),
+                0.5 * (p[1] + q[1]),
+                0.5 * (p[2] + q[2]),
+            ]
+        };
+        let err = |m: [f64; 3]| -> f64 {
+            [u, v, a, b]
+                .iter()
+                .map(|&w| self.quadrics[w as usize].eval(m).max(0.0))
+                .sum()
+        };
+        let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
+        e_new < QUADRIC_FACTOR * e_old && e_old > self.noise
+    }
+
     /// Flips edge `e` if that improves the mesh (see the [module docs](self)).
     fn try_flip(&mut self, mesh: &mut TriMesh, e: (u32, u32)) -> Option<Flip> {
         let (quadrics, normals, h) = (self.quadrics, self.normals, self.h);
@@ -234,26 +285,9 @@ impl<'a> FlipState<'a> {
         // across it), by more than noise, and lower the whole face score. The quadric test
         // comes first: it is cheap and rejects almost every edge (flat regions), so the face
         // scores (three `acos` each) are computed for the few candidates only.
-        let mid = |x: u32, y: u32| {
-            let (p, q) = (mesh.vertices[x as usize], mesh.vertices[y as usize]);
-            [
-                0.5 * (p[0] + q[0]),
-                0.5 * (p[1] + q[1]),
-                0.5 * (p[2] + q[2]),
-            ]
-        };
-        let err = |m: [f64; 3]| -> f64 {
-            [u, v, a, b]
-                .iter()
-                .map(|&w| quadrics[w as usize].eval(m).max(0.0))
-                .sum()
-        };
-        let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
         // The new edge must not exist (a hash probe: after the quadric test, which rejects
         // most edges).
-        if !(e_new < QUADRIC_FACTOR * e_old && e_old > self.noise)
-            || self.edges.contains_key(&key(a, b))
-        {
+        if !self.quadric_test(mesh, [u, v, a, b]) || self.edges.contains_key(&key(a, b)) {
             return None;
         }
         let s1 = score(mesh, quadrics, normals, h, f1)?;
@@ -339,23 +373,36 @@ fn flip_pass(
         // The first change of an edge in this pass: `true` if it was removed (so it existed
         // when the pass started), `false` if it was created.
         let mut first_change: FxHashMap<(u32, u32), bool> = FxHashMap::default();
+        // Which edges of `base` may flip at all, decided in parallel on the faces as they are
+        // at the start of the pass (most edges fail the quadric test). An edge whose faces a
+        // flip changes later in the pass is put in `extra` (and `touched`) and tried fully.
+        let may: Vec<bool> = {
+            use rayon::prelude::*;
+            let st = &st;
+            let mesh = &*mesh;
+            base.par_iter().map(|&e| st.may_flip(mesh, e)).collect()
+        };
+        let mut touched: FxHashSet<(u32, u32)> = FxHashSet::default();
         let mut i = 0;
         let mut last: Option<(u32, u32)> = None;
         loop {
-            let e = match (base.get(i), extra.first()) {
-                (Some(&x), Some(&y)) if y < x => extra.pop_first(),
+            let (e, from_base) = match (base.get(i), extra.first()) {
+                (Some(&x), Some(&y)) if y < x => (extra.pop_first(), None),
                 (Some(&x), _) => {
                     i += 1;
-                    Some(x)
+                    (Some(x), Some(i - 1))
                 }
-                (None, Some(_)) => extra.pop_first(),
-                (None, None) => None,
+                (None, Some(_)) => (extra.pop_first(), None),
+                (None, None) => (None, None),
             };
             let Some(e) = e else { break };
             if last == Some(e) {
                 continue; // in both lists
             }
             last = Some(e);
+            if from_base.is_some_and(|k| !may[k]) && !touched.contains(&e) {
+                continue; // its faces are as at the start of the pass: it cannot flip
+            }
             let Some(f) = st.try_flip(mesh, e) else {
                 continue;
             };
@@ -377,6 +424,7 @@ fn flip_pass(
                         let existed_at_start = first_change.get(&d).copied().unwrap_or(true);
                         if d > e && existed_at_start {
                             extra.insert(d);
+                            touched.insert(d);
                         } else {
                             next.push(d);
                         }

@@ -8,7 +8,7 @@
 # insert (one thread, Epick kernel, spatial sort), best of 5 per set and round.
 set -e
 ROUNDS=${1:-2}
-DIR=target/delaunay-points
+DIR="$(pwd)/target/delaunay-points"   # absolute: cargo runs benches in the package folder
 mkdir -p "$DIR"
 g++ -O3 -DNDEBUG ponq-mesh/benches/cgal/delaunay_cgal.cpp -o "$DIR/delaunay_cgal" -lgmp -lmpfr
 cargo bench -p ponq-mesh --bench delaunay_bench --no-run

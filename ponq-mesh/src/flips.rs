@@ -159,6 +159,15 @@ struct FlipState<'a> {
     noise: f64,
 }
 
+/// The two faces of an edge `u v`: `f1 = (u, v, a)` at index `i1`, `f2 = (v, u, b)` at `i2`.
+#[derive(Debug, Clone, Copy)]
+struct Quad {
+    f1: [u32; 3],
+    f2: [u32; 3],
+    i1: usize,
+    i2: usize,
+}
+
 /// A flip made: the two faces (now `(b, v, a)` and `(a, u, b)`) and the four vertices.
 #[derive(Debug, Clone, Copy)]
 struct Flip {
@@ -203,30 +212,38 @@ impl<'a> FlipState<'a> {
     /// a failed quadric test. It depends on the faces of `e` only (and on static data), so it
     /// holds until a flip changes those faces. Read-only: run on many edges in parallel.
     fn may_flip(&self, mesh: &TriMesh, e: (u32, u32)) -> bool {
-        if self.banned.contains(&e) {
-            return false;
-        }
-        let Some(fs) = self.edges.get(&e) else {
+        let Some(q) = self.quad(mesh, e) else {
             return false;
         };
-        if fs.count != 2 {
-            return false;
-        }
         let (u, v) = e;
+        let (a, b) = (q.f1[2], q.f2[2]);
+        a != b && self.quadric_test(mesh, [u, v, a, b])
+    }
+
+    /// The two faces of the edge `e = (u, v)` as `f1 = (u, v, a)` and `f2 = (v, u, b)`
+    /// with their indices, or `None` for a banned edge, an edge without exactly two faces or
+    /// faces that do not hold it in opposite directions.
+    fn quad(&self, mesh: &TriMesh, e: (u32, u32)) -> Option<Quad> {
+        if self.banned.contains(&e) {
+            return None;
+        }
+        let fs = self.edges.get(&e)?;
+        if fs.count != 2 {
+            return None;
+        }
         let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
+        let (u, v) = e;
         let (mut f1, mut f2) = (
             starting_at(mesh.faces[fa], u),
             starting_at(mesh.faces[fb], v),
         );
+        let (mut i1, mut i2) = (fa, fb);
         if f1[1] != v {
             f1 = starting_at(mesh.faces[fb], u);
             f2 = starting_at(mesh.faces[fa], v);
+            (i1, i2) = (fb, fa);
         }
-        if f1[1] != v || f2[1] != u {
-            return false;
-        }
-        let (a, b) = (f1[2], f2[2]);
-        a != b && self.quadric_test(mesh, [u, v, a, b])
+        (f1[1] == v && f2[1] == u).then_some(Quad { f1, f2, i1, i2 })
     }
 
     /// The quadric test of a flip of `u v` to `a b` (see [`FlipState::try_flip`]).
@@ -252,29 +269,8 @@ impl<'a> FlipState<'a> {
     /// Flips edge `e` if that improves the mesh (see the [module docs](self)).
     fn try_flip(&mut self, mesh: &mut TriMesh, e: (u32, u32)) -> Option<Flip> {
         let (quadrics, normals, h) = (self.quadrics, self.normals, self.h);
-        if self.banned.contains(&e) {
-            return None;
-        }
-        let fs = self.edges.get(&e)?;
-        if fs.count != 2 {
-            return None;
-        }
-        let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
+        let Quad { f1, f2, i1, i2 } = self.quad(mesh, e)?;
         let (u, v) = e;
-        // f1 = (u, v, a) and f2 = (v, u, b), whichever face holds the directed edge u->v.
-        let (mut f1, mut f2) = (
-            starting_at(mesh.faces[fa], u),
-            starting_at(mesh.faces[fb], v),
-        );
-        let (mut i1, mut i2) = (fa, fb);
-        if f1[1] != v {
-            f1 = starting_at(mesh.faces[fb], u);
-            f2 = starting_at(mesh.faces[fa], v);
-            (i1, i2) = (fb, fa);
-        }
-        if f1[1] != v || f2[1] != u {
-            return None; // inconsistent orientation: leave it
-        }
         let (a, b) = (f1[2], f2[2]);
         if a == b || self.degree[u as usize] <= 3 || self.degree[v as usize] <= 3 {
             return None;

@@ -101,7 +101,6 @@ impl Prediction {
         if tile.points_per_cell != self.points_per_cell {
             return Err(ModelError::Invalid("tile with another P".into()));
         }
-        let p = self.points_per_cell;
         for i in keep_lo[0]..keep_hi[0] {
             for j in keep_lo[1]..keep_hi[1] {
                 for k in keep_lo[2]..keep_hi[2] {
@@ -114,14 +113,7 @@ impl Prediction {
                     }
                     let src = (i * tile.cells[1] + j) * tile.cells[2] + k;
                     let dst = (gi * self.cells[1] + gj) * self.cells[2] + gk;
-                    let copy = |d: &mut Vec<f32>, s: &Vec<f32>, w: usize| {
-                        d[dst * w..(dst + 1) * w].copy_from_slice(&s[src * w..(src + 1) * w]);
-                    };
-                    copy(&mut self.points, &tile.points, 3 * p);
-                    copy(&mut self.vstars, &tile.vstars, 3 * p);
-                    copy(&mut self.normals, &tile.normals, 3 * p);
-                    copy(&mut self.cholesky, &tile.cholesky, 6 * p);
-                    copy(&mut self.occupancy, &tile.occupancy, 1);
+                    self.copy_cell(tile, src, dst);
                 }
             }
         }
@@ -151,18 +143,23 @@ impl Prediction {
                 self.cells
             )));
         }
-        let p = self.points_per_cell;
         for (src, &dst) in dst.iter().enumerate() {
-            let copy = |d: &mut Vec<f32>, s: &Vec<f32>, w: usize| {
-                d[dst * w..(dst + 1) * w].copy_from_slice(&s[src * w..(src + 1) * w]);
-            };
-            copy(&mut self.points, &part.points, 3 * p);
-            copy(&mut self.vstars, &part.vstars, 3 * p);
-            copy(&mut self.normals, &part.normals, 3 * p);
-            copy(&mut self.cholesky, &part.cholesky, 6 * p);
-            copy(&mut self.occupancy, &part.occupancy, 1);
+            self.copy_cell(part, src, dst);
         }
         Ok(())
+    }
+
+    /// Copies every output of cell `src` of `from` (same `P`) to cell `dst` of this one.
+    fn copy_cell(&mut self, from: &Prediction, src: usize, dst: usize) {
+        let p = self.points_per_cell;
+        let copy = |d: &mut Vec<f32>, s: &Vec<f32>, w: usize| {
+            d[dst * w..(dst + 1) * w].copy_from_slice(&s[src * w..(src + 1) * w]);
+        };
+        copy(&mut self.points, &from.points, 3 * p);
+        copy(&mut self.vstars, &from.vstars, 3 * p);
+        copy(&mut self.normals, &from.normals, 3 * p);
+        copy(&mut self.cholesky, &from.cholesky, 6 * p);
+        copy(&mut self.occupancy, &from.occupancy, 1);
     }
 
     /// Cells kept for meshing: occupancy above `threshold` and, when given, `close[c]`.

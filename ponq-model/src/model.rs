@@ -369,10 +369,17 @@ impl PonqNet {
             let (out, _) = self.decode(sdf);
             out.map(|t| t.select(1, idx.clone()))
         };
-        let bases_all = frame.cell_bases(dims);
+        // The bases of the listed cells only (what `GridFrame::cell_bases` gives for all).
         let bases: Vec<f32> = cells
             .iter()
-            .flat_map(|&c| bases_all[3 * c..3 * c + 3].iter().copied())
+            .flat_map(|&c| {
+                let ijk = [
+                    c / (dims[1] * dims[2]),
+                    (c / dims[2]) % dims[1],
+                    c % dims[2],
+                ];
+                (0..3).map(move |a| frame.cell_base(a, ijk[a], dims[a]) as f32)
+            })
             .collect();
         let bases =
             Tensor::<1>::from_data(TensorData::new(bases, [k * 3]), &device).reshape([1, k, 1, 3]);

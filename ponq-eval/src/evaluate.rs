@@ -51,7 +51,7 @@ pub struct EvalOptions {
     pub samples: usize,
     /// Shapes (the first ones) rendered side by side.
     pub renders: usize,
-    /// Network tile size.
+    /// Network tile size (0: `ponq_infer::reconstruct::auto_tile`).
     pub tile: usize,
     /// Name of the PoNQ rows (`PoNQ` by default; the lite rows are `<name>-lite`), so that
     /// several models can share one report.

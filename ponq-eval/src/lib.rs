@@ -26,7 +26,7 @@
 //!     coarsen: 0,
 //!     samples: 100_000,
 //!     renders: 0,
-//!     tile: 48,
+//!     tile: 0,
 //!     name: "PoNQ".into(),
 //! };
 //! for (id, path) in &shapes {

@@ -19,7 +19,8 @@ use crate::tiles::predict_tiled;
 pub struct InferOptions {
     /// The box spanned by the grid nodes (default `[-1,1]^3`).
     pub bounds: ([f64; 3], [f64; 3]),
-    /// Cells per side of a tile's kept core (a tile adds the encoder's margin on each side).
+    /// Cells per side of a tile's kept core (a tile adds the encoder's margin on each side);
+    /// 0 picks [`auto_tile`].
     pub tile: usize,
     /// PoNQ-lite: one point per cell.
     pub lite: bool,
@@ -39,7 +40,7 @@ impl Default for InferOptions {
     fn default() -> Self {
         Self {
             bounds: ([-1.0; 3], [1.0; 3]),
-            tile: 48,
+            tile: 0,
             lite: false,
             coarsen: 0,
             open: None,
@@ -47,6 +48,18 @@ impl Default for InferOptions {
             occupancy_threshold: 0.5,
             authors_cell_base: false,
         }
+    }
+}
+
+/// The tile size [`InferOptions`] uses when given 0: 128 cells where the encoder runs at the
+/// needed cells only ([`PonqNet::uses_sparse_encoder`]: memory follows the surface, and
+/// fewer tiles repeat fewer margins), 48 where it runs on whole tiles (memory follows the
+/// tile's volume).
+pub fn auto_tile(net: &PonqNet, device: &Device) -> usize {
+    if net.uses_sparse_encoder(device) {
+        128
+    } else {
+        48
     }
 }
 
@@ -123,7 +136,11 @@ pub fn infer(
         &input,
         &frame,
         encoder_layers,
-        opts.tile,
+        if opts.tile == 0 {
+            auto_tile(net, device)
+        } else {
+            opts.tile
+        },
         opts.authors_cell_base,
         Some(&close),
         device,

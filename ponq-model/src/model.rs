@@ -254,6 +254,12 @@ impl PonqNet {
         self.kernels == Kernels::Fast && fast::supports(device)
     }
 
+    /// Whether [`PonqNet::forward_cells`] on `device` runs the encoder at the listed cells'
+    /// neighbourhoods only ([`fast::sparse`]): the fast kernels without autodiff.
+    pub fn uses_sparse_encoder(&self, device: &Device) -> bool {
+        self.uses_fast_kernels(device) && !device.is_autodiff()
+    }
+
     /// Encoder features `[B, W, n1, n2, n3]` of input grids `[B, 1, n1+1, n2+1, n3+1]`.
     pub fn encode(&self, sdf: Tensor<5>) -> Tensor<5> {
         if self.uses_fast_kernels(&sdf.device()) {
@@ -317,12 +323,14 @@ impl PonqNet {
     }
 
     /// [`PonqNet::forward`] on one grid `[1, 1, n1+1, n2+1, n3+1]`, at the listed cells only
-    /// (C-order indices into its `n1 x n2 x n3` cells, any order, repeats allowed): the
-    /// encoder runs on the whole grid (every cell's features need their neighbourhood), the
-    /// five decoders only on the listed cells' features. Inference keeps only the cells near
-    /// the surface, a small part of a grid, so this skips most of the decoders' work. The
-    /// values are those of [`PonqNet::forward`] at the same cells (up to float rounding:
-    /// the same kernels on fewer rows).
+    /// (C-order indices into its `n1 x n2 x n3` cells, any order, repeats allowed): the five
+    /// decoders run only on the listed cells' features, and on the CPU without autodiff (the
+    /// fast kernels at inference) the encoder too runs only where those features depend on
+    /// ([`fast::sparse`]: the listed cells dilated by one cell per layer); elsewhere the
+    /// encoder runs on the whole grid. Inference keeps only the cells near the surface, a
+    /// small part of a grid, so this skips most of the network's work. The values are those
+    /// of [`PonqNet::forward`] at the same cells (up to float rounding: the same kernels on
+    /// fewer rows).
     ///
     /// The output's cell axis runs over the listed cells in order: its tensors are
     /// `[1, k, P, dim]` and `[1, k]` for `k = cells.len()`, and its `cells` field is
@@ -360,7 +368,11 @@ impl PonqNet {
             TensorData::new(cells.iter().map(|&c| c as i64).collect::<Vec<_>>(), [k]),
             &device,
         );
-        let [points, vstars, normals, cholesky, occupancy] = if self.uses_fast_kernels(&device) {
+        let [points, vstars, normals, cholesky, occupancy] = if self.uses_sparse_encoder(&device) {
+            // Inference: the encoder at the listed cells' neighbourhoods only.
+            let rows = self.encode_cells_sparse(sdf, dims, cells)?;
+            self.decode_rows(rows, 1)
+        } else if self.uses_fast_kernels(&device) {
             let f = self.encode_fast(sdf);
             let [_, n1, n2, n3, w] = f.dims();
             let rows = f.reshape([n1 * n2 * n3, w]).select(0, idx.clone());
@@ -395,6 +407,65 @@ impl PonqNet {
             occupancy,
             cells: [k, 1, 1],
         })
+    }
+
+    /// The encoder's features `[cells.len(), W]` at `cells` of one grid `[1, 1, n1+1, n2+1,
+    /// n3+1]` whose cells are `dims`, computed at those cells' neighbourhoods only
+    /// ([`fast::sparse`]; the fast kernels' values, without gradients).
+    fn encode_cells_sparse(
+        &self,
+        sdf: Tensor<5>,
+        dims: [usize; 3],
+        cells: &[usize],
+    ) -> crate::Result<Tensor<2>> {
+        let device = sdf.device();
+        let values = |t: TensorData| {
+            t.convert::<f32>()
+                .try_into_vec::<f32>()
+                .map_err(|e| crate::ModelError::Invalid(format!("tensor values: {e:?}")))
+        };
+        let nodes = values(sdf.into_data())?;
+        let layer = |conv: &Conv3d, cin: usize, k: usize| -> crate::Result<(Vec<f32>, Vec<f32>)> {
+            let w = values(conv.weight.val().into_data())?;
+            let cout = conv.weight.dims()[0];
+            let b = match &conv.bias {
+                Some(b) => values(b.val().into_data())?,
+                None => vec![0.0; cout],
+            };
+            let shape = fast::kernels::ConvShape {
+                batch: 1,
+                dims,
+                cin,
+                cout,
+                k,
+                pad: 0,
+            };
+            Ok((fast::kernels::pack_weight(&w, &shape, false), b))
+        };
+        let mut layers = vec![layer(&self.input, 1, 2)?];
+        for conv in &self.encoder {
+            let cin = conv.weight.dims()[1];
+            layers.push(layer(conv, cin, 3)?);
+        }
+        let width = layers.last().map_or(0, |l| l.1.len());
+        let sets = fast::sparse::ActiveSets::new(dims, cells, self.encoder.len());
+        let features = fast::sparse::encode(
+            &nodes,
+            &sets,
+            &layers,
+            fast::kernels::Act::Leaky(LEAKY_SLOPE as f32),
+        );
+        let rows = sets.rows_of(cells).ok_or_else(|| {
+            crate::ModelError::Invalid("sparse encoder: a listed cell was not computed".into())
+        })?;
+        let mut out = Vec::with_capacity(rows.len() * width);
+        for r in rows {
+            out.extend_from_slice(&features[r * width..(r + 1) * width]);
+        }
+        Ok(Tensor::<2>::from_data(
+            TensorData::new(out, [cells.len(), width]),
+            &device,
+        ))
     }
 
     /// Runs the network on `[B, 1, n1+1, n2+1, n3+1]` SDF grids (already scaled, see

@@ -198,8 +198,9 @@ fn inference_without_autodiff_equals_stock() {
     assert!(rel_diff(&fe, &se) < 1e-5);
 }
 
-/// `forward_cells` (decoders on listed cells only) gives `forward`'s values at those cells,
-/// with the fast and the stock layers, for cells in any order with repeats, on a crop; and
+/// `forward_cells` (decoders on listed cells only; on the plain CPU device the encoder at
+/// their neighbourhoods only) gives `forward`'s values at those cells, with the fast and the
+/// stock layers and on an autodiff device, for cells in any order with repeats, on a crop; and
 /// rejects a batch, an empty list and a cell outside the grid.
 #[test]
 fn forward_cells_equals_forward_at_those_cells() {
@@ -239,6 +240,16 @@ fn forward_cells_equals_forward_at_those_cells() {
         let want: Vec<f32> = cells.iter().map(|&c| occ[c]).collect();
         assert!(rel_diff(&values(part.occupancy), &want) < 1e-5);
     }
+    // With autodiff the fast path keeps the dense encoder (the sparse one gives no
+    // gradients): the same values.
+    let ad = d.clone().autodiff();
+    let net_ad = net.clone().to_device(&ad);
+    let xa = x.clone().to_device(&ad);
+    let full = net.forward(x.clone(), &frame);
+    let part = net_ad.forward_cells(xa, &frame, &cells).unwrap();
+    let occ = values(full.occupancy);
+    let want: Vec<f32> = cells.iter().map(|&c| occ[c]).collect();
+    assert!(rel_diff(&values(part.occupancy), &want) < 1e-5, "autodiff");
     let x2 = tensor(random(2 * 9 * 8 * 7, 12), [2, 1, 9, 8, 7], &d);
     assert!(net.forward_cells(x2, &frame, &[0]).is_err(), "batch of 2");
     assert!(

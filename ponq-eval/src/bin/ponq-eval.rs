@@ -297,7 +297,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         coarsen: a.coarsen,
         samples: a.samples,
         renders: a.renders,
-        tile: 48,
+        tile: 0,
         name: a.name.clone(),
     };
     std::fs::create_dir_all(a.output.join("rows"))

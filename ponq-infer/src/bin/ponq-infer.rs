@@ -74,8 +74,10 @@ struct Args {
     threads: Option<usize>,
     /// Cells per side of a network tile (the kept core; tiles overlap by the encoder's
     /// reach so the result equals one pass over the whole grid). Bounds peak memory.
-    #[arg(long, default_value_t = 48)]
-    tile: usize,
+    /// [default: 128 with the fast CPU kernels (the encoder runs near the surface only),
+    /// 48 otherwise]
+    #[arg(long)]
+    tile: Option<usize>,
     /// Skip the validity check of the output.
     #[arg(long)]
     no_check: bool,
@@ -141,7 +143,7 @@ fn run(args: &Args) -> Result<Outcome> {
     let net = net.with_kernels(args.kernels);
     let opts = InferOptions {
         bounds,
-        tile: args.tile,
+        tile: args.tile.unwrap_or(0),
         lite: args.lite,
         coarsen: args.coarsen,
         open: args.open,

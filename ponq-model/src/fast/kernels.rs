@@ -67,7 +67,7 @@ impl Act {
 /// # Safety
 /// The strided extents must lie inside the slices; `dst` must not overlap the inputs.
 #[allow(clippy::too_many_arguments)]
-unsafe fn mm(
+pub(super) unsafe fn mm(
     m: usize,
     n: usize,
     k: usize,
@@ -122,12 +122,12 @@ unsafe fn mm(
 
 /// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
 /// per core); measured best for widths 32 and 128 (`examples/kernel_rates.rs`).
-fn tile_rows(kdim: usize) -> usize {
+pub(super) fn tile_rows(kdim: usize) -> usize {
     ((1 << 17) / kdim.max(1)).clamp(128, 256)
 }
 
 /// Bias, residual and activation on a block of rows of `n` channels, in place.
-fn epilogue(y: &mut [f32], n: usize, bias: &[f32], residual: Option<&[f32]>, act: Act) {
+pub(super) fn epilogue(y: &mut [f32], n: usize, bias: &[f32], residual: Option<&[f32]>, act: Act) {
     match residual {
         Some(r) => {
             for (row, rr) in y.chunks_exact_mut(n).zip(r.chunks_exact(n)) {

@@ -5,7 +5,8 @@
 //! - [`kernels`]: the `f32` kernels on slices (im2col GEMM convolutions and 1x1x1 GEMMs with
 //!   bias, LeakyReLU and the residual add fused; their backward passes);
 //! - [`ops`]: those kernels as a Burn backend extension for `flex` and `Autodiff<flex>`, and
-//!   the `Tensor` wrappers the network calls.
+//!   the `Tensor` wrappers the network calls;
+//! - [`sparse`]: the encoder at the cells near the surface only (inference).
 //!
 //! [`Kernels`] selects the path; `PonqNet` uses the fast one on the CPU (`flex`) device unless
 //! told otherwise, and Burn's stock `Conv3d` layers on any other device (GPU backends). Both
@@ -13,6 +14,7 @@
 
 pub mod kernels;
 pub mod ops;
+pub mod sparse;
 
 use burn::prelude::*;
 

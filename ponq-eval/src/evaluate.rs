@@ -47,6 +47,8 @@ pub struct EvalOptions {
     pub methods: Vec<Method>,
     /// Hierarchy level of PoNQ-lite.
     pub coarsen: u32,
+    /// Adaptive PoNQ-lite angle of the PoNQ rows (`ponq_infer::InferOptions::merge_smooth`).
+    pub merge_smooth: Option<f64>,
     /// Surface / edge samples per mesh for the metrics.
     pub samples: usize,
     /// Shapes (the first ones) rendered side by side.
@@ -134,6 +136,7 @@ pub fn evaluate(
                     tile: opts.tile,
                     lite: m == Method::Lite,
                     coarsen: if m == Method::Lite { opts.coarsen } else { 0 },
+                    merge_smooth: opts.merge_smooth,
                     ..Default::default()
                 };
                 match infer(net, encoder_layers, &grid, &io, device, |_, _| {}) {

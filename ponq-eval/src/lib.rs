@@ -24,6 +24,7 @@
 //!     resolutions: vec![32],
 //!     methods: vec![Method::Ponq, Method::Mc],
 //!     coarsen: 0,
+//!     merge_smooth: Some(15.0),
 //!     samples: 100_000,
 //!     renders: 0,
 //!     tile: 0,

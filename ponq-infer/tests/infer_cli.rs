@@ -43,7 +43,13 @@ fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
     let d = tmp("box");
     let g = box_grid(16, [0.5, 0.35, 0.4], 0.3);
     write_npy_grid_f32(d.join("box.npy"), &g).unwrap();
-    for extra in [vec![], vec!["--lite"], vec!["--tile", "5"]] {
+    let mut vertices = Vec::new();
+    for extra in [
+        vec![],
+        vec!["--lite"],
+        vec!["--tile", "5"],
+        vec!["--merge-smooth", "0"],
+    ] {
         let o = Command::new(infer_exe())
             .arg(d.join("box.npy"))
             .arg("-o")
@@ -60,6 +66,7 @@ fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
         let m = ponq_mesh::io::read_mesh(d.join("box.obj")).unwrap();
         let r = ponq_mesh::validity::check(&m);
         assert!(r.is_valid(), "{extra:?}: {r}");
+        vertices.push(m.vertices.len());
         // The surface lies near the box: every vertex within 1.5 cells of it.
         let cell = 2.0 / 16.0;
         let (c, s) = (0.3f64.cos(), 0.3f64.sin());
@@ -76,6 +83,12 @@ fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
             );
         }
     }
+    // By default the flat cells' points are merged: fewer vertices than full PoNQ
+    // (`--merge-smooth 0`), more than PoNQ-lite (the box's edge and corner cells keep theirs).
+    assert!(
+        vertices[1] < vertices[0] && vertices[0] < vertices[3],
+        "vertices: default, lite, tiled, full {vertices:?}"
+    );
     // --open: boundary edges are allowed, self-intersections and non-manifold edges are not.
     let o = Command::new(infer_exe())
         .arg(d.join("box.npy"))
@@ -271,6 +284,15 @@ fn infer_rejects_bad_input_with_clear_errors() {
     ]);
     assert_eq!(code, Some(2));
     assert!(err.contains("6 comma-separated"), "{err}");
+    let (code, err) = run_infer(&[
+        &os(&d.join("good.npy")),
+        "-o".as_ref(),
+        &o,
+        "--merge-smooth".as_ref(),
+        "200".as_ref(),
+    ]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("[0, 180]"), "{err}");
     assert!(!out.exists(), "nothing is written on errors");
     let (code, _) = run_infer(&[
         &os(&d.join("good.npy")),

@@ -37,42 +37,122 @@ pub fn coarsen(ponq: &Ponq, cells: &[[u32; 3]], coarsen: u32) -> Result<Ponq> {
             "coarsening {coarsen} times is more than any grid supports"
         )));
     }
+    let groups = group_by_cell(cells, |c| c.map(|x| x >> coarsen));
     let vstars = ponq.vstars();
-    struct Acc {
-        q: Quadric,
-        n: [f64; 3],
-        v: [f64; 3],
-        count: f64,
+    let mut out = Merged::default();
+    for (_, members) in groups {
+        out.push_merged(ponq, &vstars, &members);
     }
-    let mut groups: HashMap<[u32; 3], Acc> = HashMap::new();
-    for i in 0..ponq.len() {
-        let key = cells[i].map(|c| c >> coarsen);
-        let a = groups.entry(key).or_insert(Acc {
-            q: Quadric::zero(),
-            n: [0.0; 3],
-            v: [0.0; 3],
-            count: 0.0,
-        });
-        a.q += ponq.quadrics[i];
-        for k in 0..3 {
-            a.n[k] += ponq.normals[i][k];
-            a.v[k] += vstars[i][k];
+    out.into_ponq()
+}
+
+/// Adaptive PoNQ-lite: merges the points of each grid cell into one (as [`coarsen`] with
+/// `coarsen = 0`) where the cell's surface is smooth, i.e. all its points' normals lie within
+/// `max_angle_deg` degrees of each other, and keeps every point of the other cells (creases and
+/// corners, where the points carry the different planes). `cells[i]` is the grid cell of point
+/// `i`. Groups come out in increasing cell order; a kept cell's points keep their order.
+///
+/// With `max_angle_deg = 0` only cells whose normals are identical are merged; with 180 every
+/// cell is (PoNQ-lite). A point with a zero normal never merges.
+///
+/// # Errors
+/// [`Error::InvalidInput`] when `cells` and the PoNQ differ in length or the angle is not in
+/// `[0, 180]`.
+pub fn merge_smooth_cells(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -> Result<Ponq> {
+    if cells.len() != ponq.len() {
+        return Err(Error::InvalidInput(format!(
+            "{} cells for {} points",
+            cells.len(),
+            ponq.len()
+        )));
+    }
+    if !(0.0..=180.0).contains(&max_angle_deg) {
+        return Err(Error::InvalidInput(format!(
+            "the normal angle for merging must be in [0, 180] degrees, got {max_angle_deg}"
+        )));
+    }
+    let min_cos = max_angle_deg.to_radians().cos();
+    let unit: Vec<Option<[f64; 3]>> = ponq
+        .normals
+        .iter()
+        .map(|n| {
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            (l > 0.0 && l.is_finite()).then(|| n.map(|x| x / l))
+        })
+        .collect();
+    let smooth = |members: &[usize]| {
+        members.iter().enumerate().all(|(k, &i)| {
+            members[k + 1..].iter().all(|&j| match (unit[i], unit[j]) {
+                (Some(a), Some(b)) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= min_cos,
+                _ => false,
+            })
+        })
+    };
+    let groups = group_by_cell(cells, |c| c);
+    let vstars = ponq.vstars();
+    let mut out = Merged::default();
+    for (_, members) in groups {
+        if members.len() > 1 && smooth(&members) {
+            out.push_merged(ponq, &vstars, &members);
+        } else {
+            for &i in &members {
+                out.points.push(ponq.points[i]);
+                out.normals.push(ponq.normals[i]);
+                out.quadrics.push(ponq.quadrics[i]);
+                out.vstars.push(vstars[i]);
+            }
         }
-        a.count += 1.0;
     }
-    let mut keys: Vec<[u32; 3]> = groups.keys().copied().collect();
-    keys.sort_unstable();
-    let mut points = Vec::with_capacity(keys.len());
-    let mut normals = Vec::with_capacity(keys.len());
-    let mut quadrics = Vec::with_capacity(keys.len());
-    let mut vs = Vec::with_capacity(keys.len());
-    for key in keys {
-        let a = &groups[&key];
-        let mean = a.v.map(|x| x / a.count);
-        points.push(mean);
-        normals.push(a.n.map(|x| x / a.count));
-        quadrics.push(a.q);
-        vs.push(a.q.optimal_point(mean, SVD_CUTOFF));
+    out.into_ponq()
+}
+
+/// The point indices of each group (`key` of the point's cell), groups in increasing key
+/// order, members in point order.
+fn group_by_cell(
+    cells: &[[u32; 3]],
+    key: impl Fn([u32; 3]) -> [u32; 3],
+) -> Vec<([u32; 3], Vec<usize>)> {
+    let mut groups: HashMap<[u32; 3], Vec<usize>> = HashMap::new();
+    for (i, &c) in cells.iter().enumerate() {
+        groups.entry(key(c)).or_default().push(i);
     }
-    Ponq::new(points, normals, quadrics, Some(vs))
+    let mut groups: Vec<_> = groups.into_iter().collect();
+    groups.sort_unstable_by_key(|g| g.0);
+    groups
+}
+
+/// A PoNQ under construction.
+#[derive(Default)]
+struct Merged {
+    points: Vec<[f64; 3]>,
+    normals: Vec<[f64; 3]>,
+    quadrics: Vec<Quadric>,
+    vstars: Vec<[f64; 3]>,
+}
+
+impl Merged {
+    /// One point for `members`: quadrics (with their `b` and `c` parts) summed, normals
+    /// averaged, the point at the mean of their v*, its v* the pseudo-inverse solution
+    /// around that mean.
+    fn push_merged(&mut self, ponq: &Ponq, vstars: &[[f64; 3]], members: &[usize]) {
+        let mut q = Quadric::zero();
+        let (mut n, mut v) = ([0.0; 3], [0.0; 3]);
+        for &i in members {
+            q += ponq.quadrics[i];
+            for k in 0..3 {
+                n[k] += ponq.normals[i][k];
+                v[k] += vstars[i][k];
+            }
+        }
+        let count = members.len() as f64;
+        let mean = v.map(|x| x / count);
+        self.points.push(mean);
+        self.normals.push(n.map(|x| x / count));
+        self.quadrics.push(q);
+        self.vstars.push(q.optimal_point(mean, SVD_CUTOFF));
+    }
+
+    fn into_ponq(self) -> Result<Ponq> {
+        Ponq::new(self.points, self.normals, self.quadrics, Some(self.vstars))
+    }
 }

@@ -5,7 +5,7 @@ mod common;
 use std::process::Command;
 
 use common::*;
-use ponq_mesh::lite::{cell_of, coarsen};
+use ponq_mesh::lite::{cell_of, coarsen, merge_smooth_cells};
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::{Ponq, Quadric, io, validity};
 
@@ -83,6 +83,78 @@ fn lite_sums_quadrics_per_cell_and_meshes_validly() {
         assert!(r.is_valid() || out.mesh.faces.is_empty(), "level {k}: {r}");
     }
     assert!(coarsen(&ponq, &cells[1..], 0).is_err());
+}
+
+/// Adaptive lite merges exactly the cells whose normals agree within the angle: on a box,
+/// the face cells (one normal) merge, the edge and corner cells (two or three normals) keep
+/// their points; 0 degrees merges nothing here, 180 is PoNQ-lite; the result meshes validly.
+#[test]
+fn merge_smooth_cells_merges_flat_cells_and_keeps_creases() {
+    let n = 16;
+    let (ponq, cells) = grid_ponq(n);
+    let mut by_cell: std::collections::BTreeMap<[u32; 3], Vec<usize>> = Default::default();
+    for (i, &c) in cells.iter().enumerate() {
+        by_cell.entry(c).or_default().push(i);
+    }
+    let unit = |n: [f64; 3]| {
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        n.map(|x| x / l)
+    };
+    // The expected outcome, cell by cell, from the normals' largest pairwise angle.
+    let max_angle = |m: &[usize]| {
+        let mut worst: f64 = 0.0;
+        for &i in m {
+            for &j in m {
+                let (a, b) = (unit(ponq.normals[i]), unit(ponq.normals[j]));
+                let c = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0);
+                worst = worst.max(c.acos().to_degrees());
+            }
+        }
+        worst
+    };
+    let flat = by_cell
+        .values()
+        .filter(|m| m.len() > 1 && max_angle(m) <= 20.0)
+        .count();
+    let crease: usize = by_cell
+        .values()
+        .filter(|m| m.len() == 1 || max_angle(m) > 20.0)
+        .map(Vec::len)
+        .sum();
+    assert!(flat > 0 && crease > 0, "the box has both kinds of cells");
+    let merged = merge_smooth_cells(&ponq, &cells, 20.0).unwrap();
+    assert_eq!(merged.len(), flat + crease);
+    // Quadric sums are preserved, so is the total.
+    let total = |p: &Ponq| p.quadrics.iter().fold(Quadric::zero(), |a, q| a + *q);
+    let (a, b) = (total(&ponq), total(&merged));
+    assert!((a.to_matrix4() - b.to_matrix4()).norm() < 1e-9 * a.to_matrix4().norm());
+    // Every point of a crease cell is still there.
+    for m in by_cell.values().filter(|m| max_angle(m) > 20.0) {
+        for &i in m {
+            assert!(
+                merged.points.contains(&ponq.points[i]),
+                "crease point {i} kept"
+            );
+        }
+    }
+    let out = mesh_ponq(
+        &merged,
+        &MeshingOptions {
+            grid_scale: n as f64,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(validity::check(&out.mesh).is_valid());
+    // 180 degrees is PoNQ-lite, point for point.
+    let all = merge_smooth_cells(&ponq, &cells, 180.0).unwrap();
+    let lite = coarsen(&ponq, &cells, 0).unwrap();
+    assert_eq!(all.points, lite.points);
+    assert_eq!(all.vstars(), lite.vstars());
+    // Errors: lengths, angles.
+    assert!(merge_smooth_cells(&ponq, &cells[1..], 20.0).is_err());
+    assert!(merge_smooth_cells(&ponq, &cells, -1.0).is_err());
+    assert!(merge_smooth_cells(&ponq, &cells, f64::NAN).is_err());
 }
 
 fn bin() -> Command {

@@ -211,6 +211,10 @@ struct RunArgs {
     /// Hierarchy level for PoNQ-lite (implies --lite).
     #[arg(long, default_value_t = 0)]
     coarsen: u32,
+    /// Adaptive PoNQ-lite in the PoNQ rows, as `ponq-infer --merge-smooth`: merge each
+    /// cell's points whose normals agree within DEG degrees; 0 keeps every point.
+    #[arg(long, value_name = "DEG", default_value_t = ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG)]
+    merge_smooth: f64,
     /// Skip the marching cubes baseline.
     #[arg(long)]
     no_mc: bool,
@@ -285,6 +289,12 @@ fn run_split(a: RunArgs) -> Result<()> {
         bail!("no shape of {} to evaluate", a.data.display());
     }
     let mut methods = vec![Method::Ponq];
+    if !(0.0..=180.0).contains(&a.merge_smooth) {
+        bail!(
+            "--merge-smooth takes an angle in [0, 180] degrees, got {}",
+            a.merge_smooth
+        );
+    }
     if a.lite || a.coarsen > 0 {
         methods.push(Method::Lite);
     }
@@ -295,6 +305,7 @@ fn run_split(a: RunArgs) -> Result<()> {
         resolutions: a.res.clone(),
         methods,
         coarsen: a.coarsen,
+        merge_smooth: (a.merge_smooth > 0.0).then_some(a.merge_smooth),
         samples: a.samples,
         renders: a.renders,
         tile: 0,

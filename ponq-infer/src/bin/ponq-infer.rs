@@ -34,6 +34,13 @@ struct Args {
     /// Coarser hierarchy level: merge 2x2x2 blocks of cells K times (implies --lite).
     #[arg(long, value_name = "K", default_value_t = 0)]
     coarsen: u32,
+    /// Adaptive PoNQ-lite: merge the points of each cell whose predicted normals agree
+    /// within DEG degrees into one (smooth surfaces come out without the small creases that
+    /// four noisy points per cell make there, with about half the vertices), keep every point
+    /// of the other cells (sharp edges and corners). 0 keeps every point of every cell (plain
+    /// PoNQ). Ignored with --lite / --coarsen.
+    #[arg(long, value_name = "DEG", default_value_t = ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG)]
+    merge_smooth: f64,
     /// Open surface: drop triangles away from sharp, planar-like quadrics (threshold T on
     /// the anisotropy lambda2/lambda1, in [0, 1], default 0.35). The output then has a
     /// boundary.
@@ -102,6 +109,12 @@ fn run(args: &Args) -> Result<Outcome> {
     if let Some(t) = args.open {
         MeshingOptions::check_open_threshold(t).context("--open")?;
     }
+    if !(0.0..=180.0).contains(&args.merge_smooth) {
+        bail!(
+            "--merge-smooth takes an angle in [0, 180] degrees, got {}",
+            args.merge_smooth
+        );
+    }
     let ext = args
         .output
         .extension()
@@ -146,6 +159,7 @@ fn run(args: &Args) -> Result<Outcome> {
         tile: args.tile.unwrap_or(0),
         lite: args.lite,
         coarsen: args.coarsen,
+        merge_smooth: (args.merge_smooth > 0.0).then_some(args.merge_smooth),
         open: args.open,
         authors_cell_base: authors,
         align_creases: !args.no_crease_flips,

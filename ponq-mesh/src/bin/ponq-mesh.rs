@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use ponq_mesh::io;
-use ponq_mesh::lite::{cell_of, coarsen};
+use ponq_mesh::lite::{cell_of, coarsen, merge_smooth_cells};
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::validity;
 
@@ -36,6 +36,11 @@ struct Args {
     /// Hierarchy: with --lite, merge 2x2x2 blocks of cells K more times (grid N / 2^K).
     #[arg(long, value_name = "K", default_value_t = 0)]
     coarsen: u32,
+    /// Adaptive PoNQ-lite: merge the points of each grid cell (found from the point
+    /// positions) whose normals agree within DEG degrees into one; keep the other cells'
+    /// points (sharp edges and corners). Not with --lite.
+    #[arg(long, value_name = "DEG")]
+    merge_smooth: Option<f64>,
     /// Open surface: drop the triangles whose three vertices all have quadric anisotropy
     /// (lambda2/lambda1) above T, in [0, 1]. Without a value T = 0.35.
     #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
@@ -71,6 +76,9 @@ fn run(args: &Args) -> Result<bool> {
     if args.coarsen > 0 && !args.lite {
         bail!("--coarsen needs --lite");
     }
+    if args.merge_smooth.is_some() && args.lite {
+        bail!("--merge-smooth and --lite exclude each other (--lite merges every cell)");
+    }
     let domain = match &args.bounds {
         None => ([-1.0; 3], [1.0; 3]),
         Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
@@ -87,6 +95,10 @@ fn run(args: &Args) -> Result<bool> {
         let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
         ponq = coarsen(&ponq, &cells, args.coarsen)?;
         grid_scale /= f64::from(1u32 << args.coarsen.min(20));
+    } else if let Some(angle) = args.merge_smooth {
+        let n = grid_scale.round() as usize;
+        let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
+        ponq = merge_smooth_cells(&ponq, &cells, angle)?;
     }
     let opts = MeshingOptions {
         grid_scale,

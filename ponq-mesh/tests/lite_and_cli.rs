@@ -182,6 +182,7 @@ fn cli_meshes_the_shipped_example() {
             vec!["--grid-scale", "32", "--bounds", "-1,-1,-1,1,1,1"],
             "d.obj",
         ),
+        (vec!["--grid-scale", "32", "--merge-smooth", "15"], "e.obj"),
     ] {
         let out = dir.join(file);
         let o = bin()
@@ -269,6 +270,27 @@ fn cli_bad_input_is_a_clear_error() {
                 "2".into(),
             ],
             "--lite",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+                "--merge-smooth".into(),
+                "15".into(),
+                "--lite".into(),
+            ],
+            "exclude each other",
+        ),
+        (
+            vec![
+                example("csg_ponq_32.npz").into(),
+                "-o".into(),
+                dir.join("x.obj").into(),
+                "--merge-smooth".into(),
+                "200".into(),
+            ],
+            "[0, 180]",
         ),
     ];
     for (args, needle) in cases {

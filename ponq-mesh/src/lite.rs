@@ -1,5 +1,20 @@
 //! PoNQ-lite and the hierarchy (SPEC section 2): merge the points of each grid cell, or of each
-//! 2^K block of cells, by summing their quadrics, and solve one v* per group.
+//! 2^K block of cells, by summing their quadrics, and solve one v* per group; and adaptive
+//! PoNQ-lite ([`merge_smooth_cells`]), which merges only the cells whose normals agree.
+//!
+//! ```
+//! use ponq_mesh::lite::{coarsen, merge_smooth_cells};
+//! use ponq_mesh::{Ponq, Quadric};
+//!
+//! // Two cells: one on a flat face (two points, same normal), one on a crease (two normals).
+//! let pts = vec![[0.1, 0.1, 0.0], [0.3, 0.2, 0.0], [1.1, 0.2, 0.0], [1.2, 0.1, 0.1]];
+//! let nrm = vec![[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]];
+//! let quadrics = pts.iter().zip(&nrm).map(|(p, n)| Quadric::from_plane(*p, *n)).collect();
+//! let ponq = Ponq::new(pts, nrm, quadrics, None).unwrap();
+//! let cells = [[0, 0, 0], [0, 0, 0], [1, 0, 0], [1, 0, 0]];
+//! assert_eq!(coarsen(&ponq, &cells, 0).unwrap().len(), 2); // PoNQ-lite: one per cell
+//! assert_eq!(merge_smooth_cells(&ponq, &cells, 15.0).unwrap().len(), 3); // the crease keeps two
+//! ```
 
 use std::collections::HashMap;
 

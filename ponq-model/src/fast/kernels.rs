@@ -120,6 +120,32 @@ pub(super) unsafe fn mm(
     }
 }
 
+/// `yt = col packed` for an im2col block `col` (`[m, kd]`, at least that long) and packed
+/// weights `packed` (`[kd, cout]`), `yt: [m, cout]`; on this thread.
+pub(super) fn col_times_weights(col: &[f32], packed: &[f32], kd: usize, yt: &mut [f32]) {
+    assert!(kd > 0 && packed.len() % kd == 0);
+    let cout = packed.len() / kd;
+    assert!(cout > 0 && yt.len() % cout == 0);
+    let m = yt.len() / cout;
+    assert!(col.len() >= m * kd);
+    // SAFETY: col is [m, kd] (row stride kd), packed [kd, cout], yt [m, cout], all in bounds
+    // by the asserts above; yt is a unique borrow.
+    unsafe {
+        mm(
+            m,
+            cout,
+            kd,
+            yt,
+            cout,
+            false,
+            col,
+            (kd, 1),
+            packed,
+            (cout, 1),
+        )
+    };
+}
+
 /// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
 /// per core); measured best for widths 32 and 128 (`examples/kernel_rates.rs`).
 pub(super) fn tile_rows(kdim: usize) -> usize {
@@ -477,21 +503,7 @@ pub fn conv_forward(
         |col, (t, yt)| {
             let m = yt.len() / cout;
             im2col(x, s, t * tile, m, col);
-            // SAFETY: col is [m, kd] (row stride kd), packed [kd, cout], yt [m, cout].
-            unsafe {
-                mm(
-                    m,
-                    cout,
-                    kd,
-                    yt,
-                    cout,
-                    false,
-                    col,
-                    (kd, 1),
-                    packed,
-                    (cout, 1),
-                )
-            };
+            col_times_weights(col, packed, kd, yt);
             if bias.iter().any(|&b| b != 0.0) || act != Act::Identity {
                 epilogue(yt, cout, bias, None, act);
             }

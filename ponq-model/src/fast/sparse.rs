@@ -18,7 +18,7 @@
 
 use rayon::prelude::*;
 
-use super::kernels::{Act, epilogue, mm, tile_rows};
+use super::kernels::{Act, col_times_weights, epilogue, tile_rows};
 
 /// No row: the cell is not active at this level.
 const ABSENT: u32 = u32::MAX;
@@ -136,21 +136,7 @@ fn gather_gemm(
             for (r, &c) in dst[t * tile..t * tile + m].iter().enumerate() {
                 fill(c as usize, &mut col[r * kd..(r + 1) * kd]);
             }
-            // SAFETY: col is [m, kd] (row stride kd), packed [kd, cout], yt [m, cout].
-            unsafe {
-                mm(
-                    m,
-                    cout,
-                    kd,
-                    yt,
-                    cout,
-                    false,
-                    col,
-                    (kd, 1),
-                    packed,
-                    (cout, 1),
-                )
-            };
+            col_times_weights(col, packed, kd, yt);
             epilogue(yt, cout, bias, None, act);
         },
     );

@@ -40,13 +40,7 @@ pub fn cell_of(p: [f64; 3], n: usize, domain: ([f64; 3], [f64; 3])) -> [u32; 3] 
 /// # Errors
 /// [`Error::InvalidInput`] when `cells` and the PoNQ differ in length.
 pub fn coarsen(ponq: &Ponq, cells: &[[u32; 3]], coarsen: u32) -> Result<Ponq> {
-    if cells.len() != ponq.len() {
-        return Err(Error::InvalidInput(format!(
-            "{} cells for {} points",
-            cells.len(),
-            ponq.len()
-        )));
-    }
+    check_one_cell_per_point(ponq, cells)?;
     if coarsen > 20 {
         return Err(Error::InvalidInput(format!(
             "coarsening {coarsen} times is more than any grid supports"
@@ -74,13 +68,7 @@ pub fn coarsen(ponq: &Ponq, cells: &[[u32; 3]], coarsen: u32) -> Result<Ponq> {
 /// [`Error::InvalidInput`] when `cells` and the PoNQ differ in length or the angle is not in
 /// `[0, 180]`.
 pub fn merge_smooth_cells(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -> Result<Ponq> {
-    if cells.len() != ponq.len() {
-        return Err(Error::InvalidInput(format!(
-            "{} cells for {} points",
-            cells.len(),
-            ponq.len()
-        )));
-    }
+    check_one_cell_per_point(ponq, cells)?;
     if !(0.0..=180.0).contains(&max_angle_deg) {
         return Err(Error::InvalidInput(format!(
             "the normal angle for merging must be in [0, 180] degrees, got {max_angle_deg}"
@@ -119,6 +107,18 @@ pub fn merge_smooth_cells(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -
         }
     }
     out.into_ponq()
+}
+
+/// [`Error::InvalidInput`] unless `cells` gives one cell per point of `ponq`.
+fn check_one_cell_per_point(ponq: &Ponq, cells: &[[u32; 3]]) -> Result<()> {
+    if cells.len() != ponq.len() {
+        return Err(Error::InvalidInput(format!(
+            "{} cells for {} points",
+            cells.len(),
+            ponq.len()
+        )));
+    }
+    Ok(())
 }
 
 /// The point indices of each group (`key` of the point's cell), groups in increasing key

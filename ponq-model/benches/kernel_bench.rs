@@ -78,16 +78,46 @@ fn main() {
             t * 1e3,
             lf / t / 1e9
         );
+        // Before: dZ, (dX, dW) and db in three passes; now: one fused pass per row tile.
+        let yl = &gz[..rows * c];
         let t = best(
             || {
+                let g = activation_grad(yl, yl, Act::Leaky(0.01));
                 drop(std::hint::black_box(linear_backward(
-                    xl, c, &wl, &gz, c, true, true,
+                    xl, c, &wl, &g, c, true, true,
+                )));
+                drop(std::hint::black_box(column_sums(&g, c)));
+            },
+            5,
+        );
+        println!(
+            "| 1x1x1 | {name} | backward (dZ, dX, dW, db), three passes | {:.2} | {:.0} |",
+            t * 1e3,
+            2.0 * lf / t / 1e9
+        );
+        let all = LinearNeeds {
+            x: true,
+            w: true,
+            b: true,
+            z: false,
+        };
+        let t = best(
+            || {
+                drop(std::hint::black_box(linear_grads(
+                    xl,
+                    c,
+                    &wl,
+                    yl,
+                    yl,
+                    Act::Leaky(0.01),
+                    c,
+                    all,
                 )))
             },
             5,
         );
         println!(
-            "| 1x1x1 | {name} | backward (dX, dW) | {:.2} | {:.0} |",
+            "| 1x1x1 | {name} | backward (dZ, dX, dW, db), fused | {:.2} | {:.0} |",
             t * 1e3,
             2.0 * lf / t / 1e9
         );

@@ -147,7 +147,7 @@ pub(super) fn col_times_weights(col: &[f32], packed: &[f32], kd: usize, yt: &mut
 }
 
 /// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
-/// per core); measured best for widths 32 and 128 (`examples/kernel_rates.rs`).
+/// per core); measured best for widths 32 and 128 (`benches/kernel_bench.rs`).
 pub(super) fn tile_rows(kdim: usize) -> usize {
     ((1 << 17) / kdim.max(1)).clamp(128, 256)
 }
@@ -334,6 +334,147 @@ pub fn linear_backward(
         sum_partials(partials, cout * cin)
     });
     (gx, gw)
+}
+
+/// Which gradients [`linear_grads`] computes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinearNeeds {
+    /// `dX` (`[rows, cin]`).
+    pub x: bool,
+    /// `dW` (`[cout, cin]`).
+    pub w: bool,
+    /// `db` (`[cout]`).
+    pub b: bool,
+    /// `dZ` itself (`[rows, cout]`: the residual's gradient).
+    pub z: bool,
+}
+
+/// The gradients of a 1x1x1 layer asked for by a [`LinearNeeds`]; `None` where not asked.
+#[derive(Debug, Default)]
+pub struct LinearGrads {
+    /// `dZ = dY * act'(Y)`.
+    pub z: Option<Vec<f32>>,
+    /// `dX = dZ W`.
+    pub x: Option<Vec<f32>>,
+    /// `dW = dZ^T X`.
+    pub w: Option<Vec<f32>>,
+    /// `db`: the column sums of `dZ`.
+    pub b: Option<Vec<f32>>,
+}
+
+/// All gradients of [`linear_forward`] from its output `y` and the output's gradient `gy`, in
+/// one pass over row tiles: each tile's `dZ` is made in cache and used at once for `dX`, `dW`
+/// and `db` (the same results as [`activation_grad`], [`linear_backward`] and [`column_sums`]
+/// up to float rounding, without their three extra passes over `[rows, cout]` arrays).
+/// Reductions are summed per fixed part of the rows, the parts in order, so results do not
+/// depend on the thread count.
+#[allow(clippy::too_many_arguments)]
+pub fn linear_grads(
+    x: &[f32],
+    cin: usize,
+    w: &[f32],
+    y: &[f32],
+    gy: &[f32],
+    act: Act,
+    cout: usize,
+    need: LinearNeeds,
+) -> LinearGrads {
+    assert!(cin > 0 && cout > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    let rows = x.len() / cin;
+    assert!(y.len() == rows * cout && gy.len() == rows * cout);
+    let tile = LINEAR_TILE;
+    let ranges = parts(rows, tile);
+    let part_rows = ranges.first().map_or(1, |&(a, b)| (b - a).max(1));
+    let mut gz = need.z.then(|| vec![0.0f32; rows * cout]);
+    let mut gx = need.x.then(|| vec![0.0f32; rows * cin]);
+    fn split(v: &mut Option<Vec<f32>>, chunk: usize, n: usize) -> Vec<Option<&mut [f32]>> {
+        let mut out: Vec<Option<&mut [f32]>> = match v {
+            Some(v) => v.chunks_mut(chunk.max(1)).map(Some).collect(),
+            None => Vec::new(),
+        };
+        out.resize_with(n, || None);
+        out
+    }
+    let gz_parts = split(&mut gz, part_rows * cout, ranges.len());
+    let gx_parts = split(&mut gx, part_rows * cin, ranges.len());
+    let wt_needed = need.w || need.b;
+    let partials: Vec<(Vec<f32>, Vec<f64>)> = ranges
+        .par_iter()
+        .zip(gz_parts)
+        .zip(gx_parts)
+        .map(|((&(a, b), mut gz_part), mut gx_part)| {
+            let mut gw = vec![0.0f32; if need.w { cout * cin } else { 0 }];
+            let mut gb = vec![0.0f64; if need.b { cout } else { 0 }];
+            let mut local = vec![0.0f32; if need.z { 0 } else { tile * cout }];
+            let mut first = true;
+            for r0 in (a..b).step_by(tile) {
+                let m = tile.min(b - r0);
+                let gzt: &mut [f32] = match gz_part.as_deref_mut() {
+                    Some(p) => &mut p[(r0 - a) * cout..(r0 - a + m) * cout],
+                    None => &mut local[..m * cout],
+                };
+                let (yt, gyt) = (
+                    &y[r0 * cout..(r0 + m) * cout],
+                    &gy[r0 * cout..(r0 + m) * cout],
+                );
+                for ((z, g), y) in gzt.iter_mut().zip(gyt).zip(yt) {
+                    *z = g * act.slope_at_output(*y);
+                }
+                if need.b {
+                    for row in gzt.chunks_exact(cout) {
+                        for (acc, v) in gb.iter_mut().zip(row) {
+                            *acc += f64::from(*v);
+                        }
+                    }
+                }
+                if let Some(p) = gx_part.as_deref_mut() {
+                    let gxt = &mut p[(r0 - a) * cin..(r0 - a + m) * cin];
+                    // SAFETY: dZ tile [m, cout] times W [cout, cin] into [m, cin].
+                    unsafe { mm(m, cin, cout, gxt, cin, false, gzt, (cout, 1), w, (cin, 1)) };
+                }
+                if need.w {
+                    let xt = &x[r0 * cin..(r0 + m) * cin];
+                    // SAFETY: dZ^T [cout, m] (row stride 1, column stride cout) times X
+                    // [m, cin] into [cout, cin].
+                    unsafe {
+                        mm(
+                            cout,
+                            cin,
+                            m,
+                            &mut gw,
+                            cin,
+                            !first,
+                            gzt,
+                            (1, cout),
+                            xt,
+                            (cin, 1),
+                        )
+                    };
+                }
+                first = false;
+            }
+            (gw, gb)
+        })
+        .collect();
+    let mut out = LinearGrads {
+        z: gz,
+        x: gx,
+        ..Default::default()
+    };
+    if wt_needed {
+        let (gws, gbs): (Vec<_>, Vec<_>) = partials.into_iter().unzip();
+        if need.w {
+            out.w = Some(sum_partials(gws, cout * cin));
+        }
+        if need.b {
+            let mut total = vec![0.0f64; cout];
+            for p in gbs {
+                total.iter_mut().zip(&p).for_each(|(t, v)| *t += v);
+            }
+            out.b = Some(total.into_iter().map(|v| v as f32).collect());
+        }
+    }
+    out
 }
 
 fn sum_partials(partials: Vec<Vec<f32>>, n: usize) -> Vec<f32> {
@@ -785,6 +926,49 @@ mod tests {
         }
     }
 
+    #[test]
+    fn fused_linear_grads_match_the_separate_kernels() {
+        // Rows around the tile and part sizes (512-row tiles, 8 parts): one short tile, exact
+        // tiles, parts with a short last tile.
+        for (rows, cin, cout) in [(37, 5, 3), (512, 8, 8), (4096 + 77, 16, 4), (9000, 3, 7)] {
+            let x = lcg(21, rows * cin);
+            let w = lcg(22, cout * cin);
+            let y = lcg(23, rows * cout);
+            let gy = lcg(24, rows * cout);
+            for act in [Act::Identity, Act::Leaky(0.01)] {
+                let gz = activation_grad(&y, &gy, act);
+                let (gx, gw) = linear_backward(&x, cin, &w, &gz, cout, true, true);
+                let gb = column_sums(&gz, cout);
+                let all = LinearNeeds {
+                    x: true,
+                    w: true,
+                    b: true,
+                    z: true,
+                };
+                let g = linear_grads(&x, cin, &w, &y, &gy, act, cout, all);
+                assert_eq!(g.z.as_deref(), Some(&gz[..]));
+                close(g.x.as_deref().unwrap(), &gx.unwrap(), 1e-5);
+                close(g.w.as_deref().unwrap(), &gw.unwrap(), 3e-4);
+                close(g.b.as_deref().unwrap(), &gb, 1e-5);
+                // Each gradient alone, and none: only what is asked for, the same values.
+                let only_w = LinearNeeds {
+                    w: true,
+                    ..Default::default()
+                };
+                let h = linear_grads(&x, cin, &w, &y, &gy, act, cout, only_w);
+                assert!(h.x.is_none() && h.z.is_none() && h.b.is_none());
+                assert_eq!(h.w, g.w);
+                let only_x = LinearNeeds {
+                    x: true,
+                    ..Default::default()
+                };
+                assert_eq!(linear_grads(&x, cin, &w, &y, &gy, act, cout, only_x).x, g.x);
+                let none = linear_grads(&x, cin, &w, &y, &gy, act, cout, LinearNeeds::default());
+                assert!(none.x.is_none() && none.w.is_none() && none.b.is_none());
+            }
+        }
+    }
+
     /// Reductions give bit-identical results for any thread count (exact resume).
     #[test]
     fn gradients_do_not_depend_on_the_thread_count() {
@@ -807,12 +991,29 @@ mod tests {
                 .install(|| {
                     let (gx, gw) =
                         linear_backward(&x[..s.out_rows() * 5], 5, &w[..30], &g, 6, true, true);
+                    let all = LinearNeeds {
+                        x: true,
+                        w: true,
+                        b: true,
+                        z: true,
+                    };
+                    let fused = linear_grads(
+                        &x[..s.out_rows() * 5],
+                        5,
+                        &w[..30],
+                        &g,
+                        &g,
+                        Act::Leaky(0.2),
+                        6,
+                        all,
+                    );
                     (
                         conv_weight_grad(&x, &s, &g),
                         conv_input_grad(&s, &w, &g),
                         column_sums(&g, s.cout),
                         gx.unwrap(),
                         gw.unwrap(),
+                        (fused.x, fused.w, fused.b, fused.z),
                     )
                 })
         };

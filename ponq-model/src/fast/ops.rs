@@ -20,7 +20,7 @@ use burn::nn::conv::Conv3d;
 use burn::prelude::*;
 use burn::tensor::DType;
 
-use super::kernels::{self, Act, ConvShape};
+use super::kernels::{self, Act, ConvShape, LinearGrads};
 
 /// The fused layers of the PoNQ network on the CPU.
 ///
@@ -220,29 +220,20 @@ struct LinearBackward;
 /// `(x, w, y, activation)`.
 type LinearState = (FlexTensor, FlexTensor, FlexTensor, Act);
 
-/// `(dZ, dX, dW, db)`, the last three when asked for.
-type LinearGrads = (
-    Vec<f32>,
-    Option<Vec<f32>>,
-    Option<Vec<f32>>,
-    Option<Vec<f32>>,
-);
-
-fn linear_grads(
-    state: LinearState,
-    gy: FlexTensor,
-    need_x: bool,
-    need_w: bool,
-    need_b: bool,
-) -> LinearGrads {
+fn linear_grads(state: LinearState, gy: FlexTensor, need: kernels::LinearNeeds) -> LinearGrads {
     let (x, w, y, act) = state;
     let xd = dims(&x);
     let wd = dims(&w);
-    let gz = kernels::activation_grad(&values(&y), &values(&gy), act);
-    let (gx, gw) =
-        kernels::linear_backward(&values(&x), xd[1], &values(&w), &gz, wd[0], need_x, need_w);
-    let gb = need_b.then(|| kernels::column_sums(&gz, wd[0]));
-    (gz, gx, gw, gb)
+    kernels::linear_grads(
+        &values(&x),
+        xd[1],
+        &values(&w),
+        &values(&y),
+        &values(&gy),
+        act,
+        wd[0],
+        need,
+    )
 }
 
 impl Backward<Flex, 3> for LinearBackward {
@@ -252,16 +243,16 @@ impl Backward<Flex, 3> for LinearBackward {
         let [node_x, node_w, node_b] = ops.parents;
         let gy = grads.consume::<Flex>(&ops.node);
         let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
-        let (_, gx, gw, gb) = linear_grads(
-            ops.state,
-            gy,
-            node_x.is_some(),
-            node_w.is_some(),
-            node_b.is_some(),
-        );
-        register(grads, node_x.map(|n| n.id), gx, xd);
-        register(grads, node_w.map(|n| n.id), gw, wd.clone());
-        register(grads, node_b.map(|n| n.id), gb, vec![wd[0]]);
+        let need = kernels::LinearNeeds {
+            x: node_x.is_some(),
+            w: node_w.is_some(),
+            b: node_b.is_some(),
+            z: false,
+        };
+        let g = linear_grads(ops.state, gy, need);
+        register(grads, node_x.map(|n| n.id), g.x, xd);
+        register(grads, node_w.map(|n| n.id), g.w, wd.clone());
+        register(grads, node_b.map(|n| n.id), g.b, vec![wd[0]]);
     }
 }
 
@@ -276,17 +267,17 @@ impl Backward<Flex, 4> for LinearResidualBackward {
         let [node_x, node_w, node_b, node_r] = ops.parents;
         let gy = grads.consume::<Flex>(&ops.node);
         let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
-        let (gz, gx, gw, gb) = linear_grads(
-            ops.state,
-            gy,
-            node_x.is_some(),
-            node_w.is_some(),
-            node_b.is_some(),
-        );
-        register(grads, node_x.map(|n| n.id), gx, xd.clone());
-        register(grads, node_w.map(|n| n.id), gw, wd.clone());
-        register(grads, node_b.map(|n| n.id), gb, vec![wd[0]]);
-        register(grads, node_r.map(|n| n.id), Some(gz), vec![xd[0], wd[0]]);
+        let need = kernels::LinearNeeds {
+            x: node_x.is_some(),
+            w: node_w.is_some(),
+            b: node_b.is_some(),
+            z: node_r.is_some(),
+        };
+        let g = linear_grads(ops.state, gy, need);
+        register(grads, node_x.map(|n| n.id), g.x, xd.clone());
+        register(grads, node_w.map(|n| n.id), g.w, wd.clone());
+        register(grads, node_b.map(|n| n.id), g.b, vec![wd[0]]);
+        register(grads, node_r.map(|n| n.id), g.z, vec![xd[0], wd[0]]);
     }
 }
 

@@ -55,7 +55,7 @@ fn read_points(path: &Path) -> Vec<[f64; 3]> {
     let bytes = std::fs::read(path)
         .unwrap_or_else(|e| panic!("cannot read point file {}: {e}", path.display()));
     assert!(
-        bytes.len() % 24 == 0,
+        bytes.len().is_multiple_of(24),
         "{}: not a whole number of f64 triples",
         path.display()
     );

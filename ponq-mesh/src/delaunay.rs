@@ -535,7 +535,7 @@ impl Worker {
         }
         if self.fail_every > 0 {
             self.lock_attempts += 1;
-            if self.lock_attempts % self.fail_every == 0 {
+            if self.lock_attempts.is_multiple_of(self.fail_every) {
                 return false;
             }
         }

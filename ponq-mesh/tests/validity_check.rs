@@ -103,10 +103,8 @@ fn union(a: &TriMesh, b: &TriMesh, merge: bool) -> TriMesh {
         .vertices
         .iter()
         .map(|p| {
-            if merge {
-                if let Some(i) = a.vertices.iter().position(|q| q == p) {
-                    return i as u32;
-                }
+            if merge && let Some(i) = a.vertices.iter().position(|q| q == p) {
+                return i as u32;
             }
             vertices.push(*p);
             (vertices.len() - 1) as u32

@@ -9,6 +9,7 @@ use burn::nn::conv::{Conv3d, Conv3dConfig};
 use burn::prelude::*;
 use burn::tensor::activation::{leaky_relu, sigmoid};
 
+use crate::fast::kernels::Precision;
 use crate::fast::{self, Kernels};
 
 /// Slope of every LeakyReLU of the network.
@@ -54,10 +55,10 @@ impl ResBlock {
     }
 
     /// The same block on channels-last rows `[rows, W]` with the fast kernels.
-    fn forward_fast(&self, x: Tensor<2>) -> Tensor<2> {
+    fn forward_fast(&self, x: Tensor<2>, p: Precision) -> Tensor<2> {
         let s = Some(LEAKY_SLOPE as f32);
-        let y = fast::ops::linear(x.clone(), &self.conv_1, None, s);
-        fast::ops::linear(y, &self.conv_2, Some(x), s)
+        let y = fast::ops::linear(x.clone(), &self.conv_1, None, s, p);
+        fast::ops::linear(y, &self.conv_2, Some(x), s, p)
     }
 }
 
@@ -93,12 +94,18 @@ impl Decoder {
     /// The same decoder on channels-last rows `[B * cells, W]` with the fast kernels; the
     /// rows of a batch item are its cells in C order, so the head's `[rows, outputs]` is
     /// already `[B, cells, outputs / dim, dim]`.
-    fn forward_fast(&self, features: Tensor<2>, batch: usize, dim: usize) -> Tensor<4> {
+    fn forward_fast(
+        &self,
+        features: Tensor<2>,
+        batch: usize,
+        dim: usize,
+        p: Precision,
+    ) -> Tensor<4> {
         let mut x = features;
         for b in &self.blocks {
-            x = b.forward_fast(x);
+            x = b.forward_fast(x, p);
         }
-        let y = fast::ops::linear(x, &self.head, None, None);
+        let y = fast::ops::linear(x, &self.head, None, None, p);
         let [rows, channels] = y.dims();
         y.reshape([batch, rows / batch, channels / dim, dim])
     }
@@ -251,7 +258,7 @@ impl PonqNet {
 
     /// Whether a forward on `device` takes the fast CPU kernels.
     pub fn uses_fast_kernels(&self, device: &Device) -> bool {
-        self.kernels == Kernels::Fast && fast::supports(device)
+        self.kernels.is_fast() && fast::supports(device)
     }
 
     /// Whether [`PonqNet::forward_cells`] on `device` runs the encoder at the listed cells'
@@ -278,10 +285,11 @@ impl PonqNet {
         let [b, c, d1, d2, d3] = sdf.dims();
         debug_assert_eq!(c, 1);
         let s = Some(LEAKY_SLOPE as f32);
+        let p = self.kernels.precision();
         // The input convolution is unpadded, the encoder's keep the size (see `init`).
-        let mut x = fast::ops::conv3d(sdf.reshape([b, d1, d2, d3, c]), &self.input, 0, s);
+        let mut x = fast::ops::conv3d(sdf.reshape([b, d1, d2, d3, c]), &self.input, 0, s, p);
         for conv in &self.encoder {
-            x = fast::ops::conv3d(x, conv, 1, s);
+            x = fast::ops::conv3d(x, conv, 1, s, p);
         }
         x
     }
@@ -312,7 +320,9 @@ impl PonqNet {
 
     /// The five decoders on channels-last feature rows `[batch * cells, W]` (fast kernels).
     fn decode_rows(&self, rows: Tensor<2>, batch: usize) -> [Tensor<4>; 5] {
-        let d = |dec: &Decoder, dim| dec.forward_fast(rows.clone(), batch, dim);
+        let d = |dec: &Decoder, dim| {
+            dec.forward_fast(rows.clone(), batch, dim, self.kernels.precision())
+        };
         [
             d(&self.decoder_points, 3),
             d(&self.decoder_vstars, 3),
@@ -454,6 +464,7 @@ impl PonqNet {
             &sets,
             &layers,
             fast::kernels::Act::Leaky(LEAKY_SLOPE as f32),
+            self.kernels.precision(),
         );
         let rows = sets.rows_of(cells).ok_or_else(|| {
             crate::ModelError::Invalid("sparse encoder: a listed cell was not computed".into())

@@ -164,14 +164,14 @@ impl Prediction {
 
     /// Cells kept for meshing: occupancy above `threshold` and, when given, `close[c]`.
     pub fn kept_cells(&self, threshold: f32, close: Option<&[bool]>) -> Result<Vec<usize>> {
-        if let Some(m) = close {
-            if m.len() != self.num_cells() {
-                return Err(ModelError::Invalid(format!(
-                    "close mask has {} cells, prediction {}",
-                    m.len(),
-                    self.num_cells()
-                )));
-            }
+        if let Some(m) = close
+            && m.len() != self.num_cells()
+        {
+            return Err(ModelError::Invalid(format!(
+                "close mask has {} cells, prediction {}",
+                m.len(),
+                self.num_cells()
+            )));
         }
         Ok((0..self.num_cells())
             .filter(|&c| self.occupancy[c] > threshold && close.is_none_or(|m| m[c]))

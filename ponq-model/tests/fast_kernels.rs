@@ -261,3 +261,97 @@ fn forward_cells_equals_forward_at_those_cells() {
         "cell outside"
     );
 }
+
+/// `|a - b| / |b|` (Euclidean norms).
+fn norm_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    let d: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+    let n: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
+    (d.sqrt() / n.sqrt().max(1e-30)) as f32
+}
+
+/// `fast-bf16` (bf16 GEMM inputs, f32 sums) follows the f32 fast path within bf16 rounding
+/// (8 bits of mantissa: relative errors of a few 1e-3 per layer), outputs and every gradient,
+/// and is not simply the f32 path (it rounds).
+#[test]
+fn bf16_kernels_follow_f32_within_bf16_rounding() {
+    if !ponq_model::fast::bf16::available() {
+        assert!(Kernels::FastBf16.unsupported_here().is_some());
+        eprintln!("no bf16 engine on this CPU: fast-bf16 not tested");
+        return;
+    }
+    assert!(Kernels::FastBf16.unsupported_here().is_none());
+    assert_eq!("fast-bf16".parse::<Kernels>(), Ok(Kernels::FastBf16));
+    assert_eq!(Kernels::FastBf16.to_string(), "fast-bf16");
+    let d = backend::cpu().autodiff();
+    for (width, p, batch, nodes, frame, seed) in [
+        (8, 4, 2, [6, 5, 7], GridFrame::crop(16, [3, 0, 5]), 21),
+        (48, 4, 1, [9, 8, 9], GridFrame::whole(8), 22),
+        (128, 1, 1, [5, 4, 5], GridFrame::whole(4), 23),
+    ] {
+        d.seed(seed);
+        let net = PonqNetConfig::new()
+            .with_width(width)
+            .with_points_per_cell(p)
+            .with_encoder_layers(2)
+            .with_decoder_blocks(2)
+            .init(&d);
+        let bf = net.clone().with_kernels(Kernels::FastBf16);
+        assert!(bf.uses_fast_kernels(&d));
+        let n: usize = nodes.iter().product();
+        let x = tensor(
+            random(batch * n, seed),
+            [batch, 1, nodes[0], nodes[1], nodes[2]],
+            &d,
+        );
+        let (of, gf, xf) = run(&net, &x, &frame, &d);
+        let (ob, gb, xb) = run(&bf, &x, &frame, &d);
+        let case = format!("width {width}, P {p}, batch {batch}");
+        let mut largest = 0.0f32;
+        for (i, (a, b)) in ob.iter().zip(&of).enumerate() {
+            let e = norm_diff(a, b);
+            assert!(e < 1e-2, "{case}: output {i} differs by {e}");
+            largest = largest.max(e);
+        }
+        assert!(
+            largest > 1e-7,
+            "{case}: bf16 output equals f32: not rounded?"
+        );
+        // Gradients: sums over many cells with cancellation, so bf16's relative error grows
+        // for the first layers' small parameter vectors; the whole gradient stays close (the
+        // per-kernel exactness is tested in `fast::kernels`).
+        let (mut all_b, mut all_f) = (vec![], vec![]);
+        for ((ia, a), (ib, b)) in gb.iter().zip(&gf) {
+            assert_eq!(ia, ib);
+            let e = norm_diff(a, b);
+            assert!(e < 0.25, "{case}: gradient of {ia:?} differs by {e}");
+            all_b.extend_from_slice(a);
+            all_f.extend_from_slice(b);
+        }
+        let e = norm_diff(&all_b, &all_f);
+        assert!(e < 0.1, "{case}: the whole gradient differs by {e}");
+        // The input gradient ends a chain of bf16 GEMMs through every layer (and LeakyReLU
+        // slopes that flip where rounding moves a pre-activation across zero).
+        let e = norm_diff(&xb, &xf);
+        assert!(e < 0.15, "{case}: input gradient differs by {e}");
+        // Inference (no autodiff, sparse encoder) follows too.
+        let dc = backend::cpu();
+        dc.seed(seed);
+        let plain = PonqNetConfig::new()
+            .with_width(width)
+            .with_points_per_cell(p)
+            .with_encoder_layers(2)
+            .with_decoder_blocks(2)
+            .init(&dc);
+        let xc = tensor(random(n, seed), [1, 1, nodes[0], nodes[1], nodes[2]], &dc);
+        let f32_out = values(plain.forward(xc.clone(), &frame).normals);
+        let bf_out = values(
+            plain
+                .with_kernels(Kernels::FastBf16)
+                .forward(xc, &frame)
+                .normals,
+        );
+        let e = norm_diff(&bf_out, &f32_out);
+        assert!(e < 1e-2, "{case}: inference normals differ by {e}");
+    }
+}

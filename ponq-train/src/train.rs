@@ -407,6 +407,9 @@ pub fn run_with_shapes(
     } else {
         None
     };
+    if let Some(e) = opts.kernels.unsupported_here() {
+        bail!(e);
+    }
     let mut model = if let Some(dir) = &ck {
         let (m, o, s) = ck_paths(dir);
         state = serde_json::from_str(&std::fs::read_to_string(&s)?)
@@ -499,7 +502,7 @@ pub fn run_with_shapes(
         state.seconds = seconds_before + start.elapsed().as_secs_f64();
         summary.last_train = mean;
         let every = |k: usize| {
-            k > 0 && (state.epochs_done % k == 0 || state.epochs_done == cfg.train.epochs)
+            k > 0 && (state.epochs_done.is_multiple_of(k) || state.epochs_done == cfg.train.epochs)
         };
         let val_terms = if every(cfg.train.validate_every) && !val_items.is_empty() {
             let v = validate(&model, &val_items, cfg, &device)?;

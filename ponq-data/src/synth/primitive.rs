@@ -389,7 +389,7 @@ impl Kind {
             Kind::Ellipsoid { radii } => smooth::ellipsoid_sample(*radii, rng),
             Kind::Box { half } => {
                 let axis = part / 2;
-                let sign = if part % 2 == 0 { 1.0 } else { -1.0 };
+                let sign = if part.is_multiple_of(2) { 1.0 } else { -1.0 };
                 let mut q = [0.0; 3];
                 for k in 0..3 {
                     let (lo, hi) = clip.range(k, half[k]);
@@ -611,7 +611,7 @@ impl Kind {
             } => smooth::rounded_cylinder_patch(*radius, *half_height, *fillet, part, q),
             Kind::Ellipsoid { radii } => smooth::ellipsoid_patch(*radii, q),
             Kind::Box { half } => {
-                let (a, sign) = (part / 2, if part % 2 == 0 { 1.0 } else { -1.0 });
+                let (a, sign) = (part / 2, if part.is_multiple_of(2) { 1.0 } else { -1.0 });
                 let mut n = [0.0; 3];
                 n[a] = sign;
                 plane(n, half[a])

@@ -225,8 +225,10 @@ struct RunArgs {
     /// feature of that name).
     #[arg(long, default_value = "flex")]
     backend: ponq_model::backend::BackendKind,
-    /// Layer implementation of the network on the CPU: fast (custom kernels, default) or
-    /// stock (Burn's Conv3d layers); same numbers up to float rounding.
+    /// Layer implementation of the network on the CPU: fast (custom kernels, default),
+    /// fast-bf16 (bf16 GEMM inputs, f32 sums; AMX or AVX-512 BF16, an error on CPUs without)
+    /// or stock (Burn's Conv3d layers); fast and stock give the same numbers up to float
+    /// rounding.
     #[arg(long, default_value = "fast")]
     kernels: ponq_model::Kernels,
     /// Surface and sharp-edge samples per mesh for the metrics.
@@ -255,6 +257,9 @@ fn run_split(a: RunArgs) -> Result<()> {
     use indicatif::{ProgressBar, ProgressStyle};
     use ponq_eval::{self as eval, EvalOptions, Method};
     use rayon::prelude::*;
+    if let Some(e) = a.kernels.unsupported_here() {
+        bail!(e);
+    }
     if let Some(j) = a.jobs {
         rayon::ThreadPoolBuilder::new()
             .num_threads(j.max(1))

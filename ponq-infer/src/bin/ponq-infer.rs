@@ -72,8 +72,10 @@ struct Args {
     /// onto the sharp edges the quadrics describe.
     #[arg(long)]
     no_crease_flips: bool,
-    /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
-    /// Conv3d layers). Same numbers up to float rounding; GPU backends use the stock layers.
+    /// Layer implementation on the CPU: fast (custom kernels, default), fast-bf16 (the same
+    /// with bf16 GEMM inputs and f32 sums: AMX tiles or AVX-512 BF16, an error on CPUs
+    /// without) or stock (Burn's Conv3d layers). fast and stock give the same numbers up to
+    /// float rounding; GPU backends use the stock layers.
     #[arg(long, default_value = "fast")]
     kernels: ponq_model::Kernels,
     /// Worker threads [default: all cores].
@@ -100,6 +102,9 @@ enum Outcome {
 }
 
 fn run(args: &Args) -> Result<Outcome> {
+    if let Some(e) = args.kernels.unsupported_here() {
+        bail!(e);
+    }
     if let Some(t) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(t.max(1))

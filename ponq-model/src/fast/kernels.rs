@@ -62,6 +62,27 @@ impl Act {
     }
 }
 
+/// The arithmetic of the kernels' GEMMs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Precision {
+    /// f32 products and sums (the `gemm` crate).
+    #[default]
+    F32,
+    /// Inputs rounded to bf16, products summed in f32 ([`super::bf16`], AVX-512 BF16); where
+    /// the CPU lacks it the f32 kernel runs instead (see [`Precision::effective`]).
+    Bf16,
+}
+
+impl Precision {
+    /// What runs on this CPU: `Bf16` only where [`super::bf16::available`].
+    pub fn effective(self) -> Precision {
+        match self {
+            Precision::Bf16 if super::bf16::available() => Precision::Bf16,
+            _ => Precision::F32,
+        }
+    }
+}
+
 /// `dst[m, n] (+)= lhs[m, k] * rhs[k, n]` with explicit row / column strides, on this thread.
 ///
 /// # Safety
@@ -78,7 +99,26 @@ pub(super) unsafe fn mm(
     (lhs_rs, lhs_cs): (usize, usize),
     rhs: &[f32],
     (rhs_rs, rhs_cs): (usize, usize),
+    prec: Precision,
 ) {
+    if prec.effective() == Precision::Bf16 {
+        // SAFETY: `effective` checked the CPU features; extents as the caller guarantees.
+        unsafe {
+            super::bf16::gemm(
+                m,
+                n,
+                k,
+                dst,
+                dst_rs,
+                accumulate,
+                lhs,
+                (lhs_rs, lhs_cs),
+                rhs,
+                (rhs_rs, rhs_cs),
+            )
+        };
+        return;
+    }
     if m == 0 || n == 0 {
         return;
     }
@@ -120,30 +160,59 @@ pub(super) unsafe fn mm(
     }
 }
 
-/// `yt = col packed` for an im2col block `col` (`[m, kd]`, at least that long) and packed
-/// weights `packed` (`[kd, cout]`), `yt: [m, cout]`; on this thread.
-pub(super) fn col_times_weights(col: &[f32], packed: &[f32], kd: usize, yt: &mut [f32]) {
-    assert!(kd > 0 && packed.len() % kd == 0);
-    let cout = packed.len() / kd;
-    assert!(cout > 0 && yt.len() % cout == 0);
-    let m = yt.len() / cout;
-    assert!(col.len() >= m * kd);
-    // SAFETY: col is [m, kd] (row stride kd), packed [kd, cout], yt [m, cout], all in bounds
-    // by the asserts above; yt is a unique borrow.
-    unsafe {
-        mm(
-            m,
-            cout,
-            kd,
-            yt,
-            cout,
-            false,
-            col,
-            (kd, 1),
-            packed,
-            (cout, 1),
-        )
-    };
+/// A GEMM's right-hand side `[k, n]` (row-major), shared by many row tiles (a layer's
+/// weights): with [`Precision::Bf16`] it is packed once into bf16 pairs here instead of per
+/// tile. Invariant: `bf16`, when present, packs `b`.
+pub(super) struct Weights<'a> {
+    b: &'a [f32],
+    k: usize,
+    n: usize,
+    bf16: Option<super::bf16::PackedB>,
+}
+
+impl<'a> Weights<'a> {
+    /// `b: [k, n]`; packed for bf16 when `prec` is effectively bf16.
+    pub(super) fn new(b: &'a [f32], k: usize, n: usize, prec: Precision) -> Self {
+        assert_eq!(b.len(), k * n);
+        let bf16 = if prec.effective() == Precision::Bf16 {
+            super::bf16::PackedB::new(b, (n, 1), k, n)
+        } else {
+            None
+        };
+        Self { b, k, n, bf16 }
+    }
+
+    /// `dst[m, n] = lhs[m, k] B` for `lhs` with row stride `lhs_rs` (column stride 1) and
+    /// `dst` `[m, n]`; on this thread.
+    pub(super) fn mul(&self, lhs: &[f32], lhs_rs: usize, dst: &mut [f32]) {
+        let (k, n) = (self.k, self.n);
+        assert!(n > 0 && dst.len().is_multiple_of(n));
+        let m = dst.len() / n;
+        if m == 0 {
+            return;
+        }
+        assert!(lhs_rs >= k && lhs.len() >= (m - 1) * lhs_rs + k);
+        match &self.bf16 {
+            // SAFETY: lhs is [m, k] at row stride lhs_rs, dst [m, n]: in bounds (asserted).
+            Some(pb) => unsafe { super::bf16::gemm_packed(m, dst, n, false, lhs, (lhs_rs, 1), pb) },
+            // SAFETY: as above; B is [k, n] (asserted in `new`).
+            None => unsafe {
+                mm(
+                    m,
+                    n,
+                    k,
+                    dst,
+                    n,
+                    false,
+                    lhs,
+                    (lhs_rs, 1),
+                    self.b,
+                    (n, 1),
+                    Precision::F32,
+                )
+            },
+        }
+    }
 }
 
 /// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
@@ -202,7 +271,7 @@ fn parts(rows: usize, unit: usize) -> Vec<(usize, usize)> {
 
 /// Sum over rows of a `[rows, n]` block (the bias gradient).
 pub fn column_sums(g: &[f32], n: usize) -> Vec<f32> {
-    assert!(n > 0 && g.len() % n == 0);
+    assert!(n > 0 && g.len().is_multiple_of(n));
     let partials: Vec<Vec<f64>> = parts(g.len() / n, 1)
         .into_par_iter()
         .map(|(a, b)| {
@@ -249,9 +318,10 @@ pub fn linear_forward(
     bias: &[f32],
     residual: Option<&[f32]>,
     act: Act,
+    prec: Precision,
 ) -> Vec<f32> {
     let cout = bias.len();
-    assert!(cin > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    assert!(cin > 0 && x.len().is_multiple_of(cin) && w.len() == cout * cin);
     let rows = x.len() / cin;
     if let Some(r) = residual {
         assert_eq!(r.len(), rows * cout);
@@ -270,7 +340,21 @@ pub fn linear_forward(
             let xt = &x[r0 * cin..(r0 + m) * cin];
             // SAFETY: xt is [m, cin], wt is W^T [cin, cout], yt is [m, cout]; all in bounds
             // by the asserts above.
-            unsafe { mm(m, cout, cin, yt, cout, false, xt, (cin, 1), &wt, (cout, 1)) };
+            unsafe {
+                mm(
+                    m,
+                    cout,
+                    cin,
+                    yt,
+                    cout,
+                    false,
+                    xt,
+                    (cin, 1),
+                    &wt,
+                    (cout, 1),
+                    prec,
+                )
+            };
             let rt = residual.map(|r| &r[r0 * cout..(r0 + m) * cout]);
             epilogue(yt, cout, bias, rt, act);
         });
@@ -288,7 +372,7 @@ pub fn linear_backward(
     need_x: bool,
     need_w: bool,
 ) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
-    assert!(cin > 0 && cout > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    assert!(cin > 0 && cout > 0 && x.len().is_multiple_of(cin) && w.len() == cout * cin);
     let rows = x.len() / cin;
     assert_eq!(gz.len(), rows * cout);
     let gx = need_x.then(|| {
@@ -300,7 +384,21 @@ pub fn linear_backward(
                 let m = gxt.len() / cin;
                 let gzt = &gz[t * tile * cout..(t * tile + m) * cout];
                 // SAFETY: dZ tile [m, cout] times W [cout, cin] into [m, cin].
-                unsafe { mm(m, cin, cout, gxt, cin, false, gzt, (cout, 1), w, (cin, 1)) };
+                unsafe {
+                    mm(
+                        m,
+                        cin,
+                        cout,
+                        gxt,
+                        cin,
+                        false,
+                        gzt,
+                        (cout, 1),
+                        w,
+                        (cin, 1),
+                        Precision::F32,
+                    )
+                };
             });
         gx
     });
@@ -326,6 +424,7 @@ pub fn linear_backward(
                         (1, cout),
                         xt,
                         (cin, 1),
+                        Precision::F32,
                     )
                 };
                 p
@@ -378,8 +477,9 @@ pub fn linear_grads(
     act: Act,
     cout: usize,
     need: LinearNeeds,
+    prec: Precision,
 ) -> LinearGrads {
-    assert!(cin > 0 && cout > 0 && x.len() % cin == 0 && w.len() == cout * cin);
+    assert!(cin > 0 && cout > 0 && x.len().is_multiple_of(cin) && w.len() == cout * cin);
     let rows = x.len() / cin;
     assert!(y.len() == rows * cout && gy.len() == rows * cout);
     let tile = LINEAR_TILE;
@@ -395,6 +495,7 @@ pub fn linear_grads(
         out.resize_with(n, || None);
         out
     }
+    let w_dx = Weights::new(w, cout, cin, prec);
     let gz_parts = split(&mut gz, part_rows * cout, ranges.len());
     let gx_parts = split(&mut gx, part_rows * cin, ranges.len());
     let wt_needed = need.w || need.b;
@@ -428,9 +529,8 @@ pub fn linear_grads(
                     }
                 }
                 if let Some(p) = gx_part.as_deref_mut() {
-                    let gxt = &mut p[(r0 - a) * cin..(r0 - a + m) * cin];
-                    // SAFETY: dZ tile [m, cout] times W [cout, cin] into [m, cin].
-                    unsafe { mm(m, cin, cout, gxt, cin, false, gzt, (cout, 1), w, (cin, 1)) };
+                    // dZ tile [m, cout] times W [cout, cin] into [m, cin].
+                    w_dx.mul(gzt, cout, &mut p[(r0 - a) * cin..(r0 - a + m) * cin]);
                 }
                 if need.w {
                     let xt = &x[r0 * cin..(r0 + m) * cin];
@@ -448,6 +548,7 @@ pub fn linear_grads(
                             (1, cout),
                             xt,
                             (cin, 1),
+                            prec,
                         )
                     };
                 }
@@ -626,6 +727,7 @@ pub fn conv_forward(
     packed: &[f32],
     bias: Option<&[f32]>,
     act: Act,
+    prec: Precision,
 ) -> Vec<f32> {
     s.check();
     assert_eq!(x.len(), s.in_rows() * s.cin);
@@ -639,12 +741,13 @@ pub fn conv_forward(
     let tile = tile_rows(kd);
     let zero = vec![0.0f32; cout];
     let bias = bias.unwrap_or(&zero);
+    let weights = Weights::new(packed, kd, cout, prec);
     y.par_chunks_mut(tile * cout).enumerate().for_each_init(
         || vec![0.0f32; tile * kd],
         |col, (t, yt)| {
             let m = yt.len() / cout;
             im2col(x, s, t * tile, m, col);
-            col_times_weights(col, packed, kd, yt);
+            weights.mul(col, kd, yt);
             if bias.iter().any(|&b| b != 0.0) || act != Act::Identity {
                 epilogue(yt, cout, bias, None, act);
             }
@@ -654,13 +757,16 @@ pub fn conv_forward(
 }
 
 /// Weight gradient of a convolution: `dW = im2col(X)^T dZ`, as `[cout, cin, k, k, k]`.
-pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
+/// (With bf16 it is made as `dW^T = dZ^T im2col(X)`, whose large operand, the im2col block,
+/// is the one the bf16 kernel packs fastest.)
+pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32], prec: Precision) -> Vec<f32> {
     s.check();
     let (kd, cout) = (s.kdim(), s.cout);
     let rows = s.out_rows();
     assert_eq!(gz.len(), rows * cout);
     assert_eq!(x.len(), s.in_rows() * s.cin);
     let tile = tile_rows(kd);
+    let transposed = prec.effective() == Precision::Bf16;
     let partials: Vec<Vec<f32>> = parts(rows, tile)
         .into_par_iter()
         .map(|(a, b)| {
@@ -671,36 +777,61 @@ pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
                 let m = tile.min(b - r0);
                 im2col(x, s, r0, m, &mut col);
                 let gzt = &gz[r0 * cout..(r0 + m) * cout];
-                // SAFETY: col^T is [kd, m] (row stride 1, column stride kd), dZ tile
-                // [m, cout], acc [kd, cout].
-                unsafe {
-                    mm(
-                        kd,
-                        cout,
-                        m,
-                        &mut acc,
-                        cout,
-                        !first,
-                        &col,
-                        (1, kd),
-                        gzt,
-                        (cout, 1),
-                    )
-                };
+                if transposed {
+                    // SAFETY: dZ^T is [cout, m] (row stride 1, column stride cout), col
+                    // [m, kd], acc [cout, kd].
+                    unsafe {
+                        mm(
+                            cout,
+                            kd,
+                            m,
+                            &mut acc,
+                            kd,
+                            !first,
+                            gzt,
+                            (1, cout),
+                            &col,
+                            (kd, 1),
+                            prec,
+                        )
+                    };
+                } else {
+                    // SAFETY: col^T is [kd, m] (row stride 1, column stride kd), dZ tile
+                    // [m, cout], acc [kd, cout].
+                    unsafe {
+                        mm(
+                            kd,
+                            cout,
+                            m,
+                            &mut acc,
+                            cout,
+                            !first,
+                            &col,
+                            (1, kd),
+                            gzt,
+                            (cout, 1),
+                            prec,
+                        )
+                    };
+                }
                 first = false;
             }
             acc
         })
         .collect();
     let g = sum_partials(partials, kd * cout);
-    // [(offset, ci), co] -> [co, ci, offset]
+    // [(offset, ci), co] (or [co, (offset, ci)]) -> [co, ci, offset]
     let k3 = s.k * s.k * s.k;
     let cin = s.cin;
     let mut out = vec![0.0f32; g.len()];
     for o in 0..k3 {
         for ci in 0..cin {
             for co in 0..cout {
-                out[(co * cin + ci) * k3 + o] = g[(o * cin + ci) * cout + co];
+                out[(co * cin + ci) * k3 + o] = if transposed {
+                    g[co * kd + o * cin + ci]
+                } else {
+                    g[(o * cin + ci) * cout + co]
+                };
             }
         }
     }
@@ -709,10 +840,10 @@ pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
 
 /// Input gradient of a convolution: the transposed convolution of `dZ` (see
 /// [`ConvShape::transposed`]); `w` is the `[cout, cin, k, k, k]` weight.
-pub fn conv_input_grad(s: &ConvShape, w: &[f32], gz: &[f32]) -> Vec<f32> {
+pub fn conv_input_grad(s: &ConvShape, w: &[f32], gz: &[f32], prec: Precision) -> Vec<f32> {
     let t = s.transposed();
     let packed = pack_weight(w, s, true);
-    conv_forward(gz, &t, &packed, None, Act::Identity)
+    conv_forward(gz, &t, &packed, None, Act::Identity, prec)
 }
 
 #[cfg(test)]
@@ -825,7 +956,14 @@ mod tests {
             let x = lcg(1, s.in_rows() * s.cin);
             let w = lcg(2, s.cout * s.cin * s.k * s.k * s.k);
             let b = lcg(3, s.cout);
-            let y = conv_forward(&x, &s, &pack_weight(&w, &s, false), Some(&b), Act::Identity);
+            let y = conv_forward(
+                &x,
+                &s,
+                &pack_weight(&w, &s, false),
+                Some(&b),
+                Act::Identity,
+                Precision::F32,
+            );
             close(&y, &conv_naive(&x, &s, &w, &b), 1e-5);
         }
     }
@@ -863,7 +1001,14 @@ mod tests {
             let x = lcg(4, s.in_rows() * s.cin);
             let w = lcg(5, s.cout * s.cin * s.k * s.k * s.k);
             let g = lcg(6, s.out_rows() * s.cout);
-            let y = conv_forward(&x, &s, &pack_weight(&w, &s, false), None, Act::Identity);
+            let y = conv_forward(
+                &x,
+                &s,
+                &pack_weight(&w, &s, false),
+                None,
+                Act::Identity,
+                Precision::F32,
+            );
             let dot = |a: &[f32], b: &[f32]| -> f64 {
                 a.iter()
                     .zip(b)
@@ -871,8 +1016,8 @@ mod tests {
                     .sum()
             };
             let lhs = dot(&y, &g);
-            let gx = conv_input_grad(&s, &w, &g);
-            let gw = conv_weight_grad(&x, &s, &g);
+            let gx = conv_input_grad(&s, &w, &g, Precision::F32);
+            let gw = conv_weight_grad(&x, &s, &g, Precision::F32);
             assert!(
                 (lhs - dot(&x, &gx)).abs() < 1e-4 * (1.0 + lhs.abs()),
                 "{s:?}"
@@ -892,7 +1037,7 @@ mod tests {
         let b = lcg(9, cout);
         let r = lcg(10, rows * cout);
         let act = Act::Leaky(0.01);
-        let y = linear_forward(&x, cin, &w, &b, Some(&r), act);
+        let y = linear_forward(&x, cin, &w, &b, Some(&r), act, Precision::F32);
         for i in 0..rows {
             for o in 0..cout {
                 let z: f32 = (0..cin)
@@ -945,7 +1090,7 @@ mod tests {
                     b: true,
                     z: true,
                 };
-                let g = linear_grads(&x, cin, &w, &y, &gy, act, cout, all);
+                let g = linear_grads(&x, cin, &w, &y, &gy, act, cout, all, Precision::F32);
                 assert_eq!(g.z.as_deref(), Some(&gz[..]));
                 close(g.x.as_deref().unwrap(), &gx.unwrap(), 1e-5);
                 close(g.w.as_deref().unwrap(), &gw.unwrap(), 3e-4);
@@ -955,17 +1100,115 @@ mod tests {
                     w: true,
                     ..Default::default()
                 };
-                let h = linear_grads(&x, cin, &w, &y, &gy, act, cout, only_w);
+                let h = linear_grads(&x, cin, &w, &y, &gy, act, cout, only_w, Precision::F32);
                 assert!(h.x.is_none() && h.z.is_none() && h.b.is_none());
                 assert_eq!(h.w, g.w);
                 let only_x = LinearNeeds {
                     x: true,
                     ..Default::default()
                 };
-                assert_eq!(linear_grads(&x, cin, &w, &y, &gy, act, cout, only_x).x, g.x);
-                let none = linear_grads(&x, cin, &w, &y, &gy, act, cout, LinearNeeds::default());
+                assert_eq!(
+                    linear_grads(&x, cin, &w, &y, &gy, act, cout, only_x, Precision::F32).x,
+                    g.x
+                );
+                let none = linear_grads(
+                    &x,
+                    cin,
+                    &w,
+                    &y,
+                    &gy,
+                    act,
+                    cout,
+                    LinearNeeds::default(),
+                    Precision::F32,
+                );
                 assert!(none.x.is_none() && none.w.is_none() && none.b.is_none());
             }
+        }
+    }
+
+    /// Each bf16 kernel equals its f32 version fed with the bf16-rounded inputs (up to f32
+    /// summation order): every layout and packing path the layers use.
+    #[test]
+    fn bf16_kernels_equal_f32_on_rounded_inputs() {
+        if !super::super::bf16::available() {
+            return;
+        }
+        let r = |v: &[f32]| -> Vec<f32> {
+            v.iter()
+                .map(|&x| super::super::bf16::round_bf16(x))
+                .collect()
+        };
+        let (f, b) = (Precision::F32, Precision::Bf16);
+        for (dims, cin, cout, k, pad) in [
+            ([5, 6, 7], 3, 20, 3, 1),
+            ([9, 8, 9], 16, 48, 3, 1),
+            ([6, 6, 6], 1, 17, 2, 0),
+        ] {
+            let s = ConvShape {
+                batch: 2,
+                dims,
+                cin,
+                cout,
+                k,
+                pad,
+            };
+            let x = lcg(31, s.in_rows() * cin);
+            let w = lcg(32, cout * cin * k * k * k);
+            let g = lcg(33, s.out_rows() * cout);
+            let y_b = conv_forward(&x, &s, &pack_weight(&w, &s, false), None, Act::Identity, b);
+            let y_f = conv_forward(
+                &r(&x),
+                &s,
+                &pack_weight(&r(&w), &s, false),
+                None,
+                Act::Identity,
+                f,
+            );
+            close(&y_b, &y_f, 1e-5);
+            close(
+                &conv_weight_grad(&x, &s, &g, b),
+                &conv_weight_grad(&r(&x), &s, &r(&g), f),
+                1e-4,
+            );
+            close(
+                &conv_input_grad(&s, &w, &g, b),
+                &conv_input_grad(&s, &r(&w), &r(&g), f),
+                1e-5,
+            );
+        }
+        for (rows, cin, cout) in [(37, 5, 3), (1100, 48, 48), (600, 128, 12)] {
+            let x = lcg(41, rows * cin);
+            let w = lcg(42, cout * cin);
+            let bias = lcg(43, cout);
+            let y = lcg(44, rows * cout);
+            let gy = lcg(45, rows * cout);
+            close(
+                &linear_forward(&x, cin, &w, &bias, Some(&y), Act::Leaky(0.1), b),
+                &linear_forward(&r(&x), cin, &r(&w), &bias, Some(&y), Act::Leaky(0.1), f),
+                1e-5,
+            );
+            let all = LinearNeeds {
+                x: true,
+                w: true,
+                b: true,
+                z: true,
+            };
+            let gb = linear_grads(&x, cin, &w, &y, &gy, Act::Identity, cout, all, b);
+            let gf = linear_grads(
+                &r(&x),
+                cin,
+                &r(&w),
+                &y,
+                &r(&gy),
+                Act::Identity,
+                cout,
+                all,
+                f,
+            );
+            close(gb.x.as_deref().unwrap(), gf.x.as_deref().unwrap(), 1e-5);
+            close(gb.w.as_deref().unwrap(), gf.w.as_deref().unwrap(), 1e-4);
+            assert_eq!(gb.z, Some(gy.clone()), "dZ itself is not rounded");
         }
     }
 
@@ -983,7 +1226,7 @@ mod tests {
         let x = lcg(12, s.in_rows() * s.cin);
         let w = lcg(13, s.cout * s.cin * 27);
         let g = lcg(14, s.out_rows() * s.cout);
-        let run = |threads: usize| {
+        let run = |threads: usize, prec: Precision| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
@@ -1006,10 +1249,11 @@ mod tests {
                         Act::Leaky(0.2),
                         6,
                         all,
+                        prec,
                     );
                     (
-                        conv_weight_grad(&x, &s, &g),
-                        conv_input_grad(&s, &w, &g),
+                        conv_weight_grad(&x, &s, &g, prec),
+                        conv_input_grad(&s, &w, &g, prec),
                         column_sums(&g, s.cout),
                         gx.unwrap(),
                         gw.unwrap(),
@@ -1017,9 +1261,11 @@ mod tests {
                     )
                 })
         };
-        let one = run(1);
-        for t in [2, 3, 8] {
-            assert!(run(t) == one, "{t} threads");
+        for prec in [Precision::F32, Precision::Bf16] {
+            let one = run(1, prec);
+            for t in [2, 3, 8] {
+                assert!(run(t, prec) == one, "{t} threads, {prec:?}");
+            }
         }
     }
 }

@@ -2,8 +2,9 @@
 //! for the layers that cost the time, on channels-last activations from the encoder's first
 //! layer to the decoder heads (no layout conversion per layer).
 //!
-//! - [`kernels`]: the `f32` kernels on slices (im2col GEMM convolutions and 1x1x1 GEMMs with
-//!   bias, LeakyReLU and the residual add fused; their backward passes);
+//! - [`kernels`]: the kernels on slices (im2col GEMM convolutions and 1x1x1 GEMMs with
+//!   bias, LeakyReLU and the residual add fused; their backward passes), f32 or bf16 GEMMs;
+//! - [`bf16`]: the bf16 GEMM with f32 sums (AVX-512 BF16, runtime detected);
 //! - [`ops`]: those kernels as a Burn backend extension for `flex` and `Autodiff<flex>`, and
 //!   the `Tensor` wrappers the network calls;
 //! - [`sparse`]: the encoder at the cells near the surface only (inference).
@@ -12,6 +13,7 @@
 //! told otherwise, and Burn's stock `Conv3d` layers on any other device (GPU backends). Both
 //! give the same numbers within float rounding (tested).
 
+pub mod bf16;
 pub mod kernels;
 pub mod ops;
 pub mod sparse;
@@ -26,6 +28,35 @@ pub enum Kernels {
     Fast,
     /// Burn's stock `Conv3d` layers everywhere.
     Stock,
+    /// The fast CPU kernels with bf16 GEMM inputs and f32 sums
+    /// ([`kernels::Precision::Bf16`]); needs AVX-512 BF16 ([`bf16::available`]), else the f32
+    /// kernels run. Stock layers off the CPU.
+    FastBf16,
+}
+
+impl Kernels {
+    /// Whether this selects the fast CPU kernels (in either precision).
+    pub fn is_fast(self) -> bool {
+        matches!(self, Self::Fast | Self::FastBf16)
+    }
+
+    /// The GEMM precision of the fast kernels.
+    pub fn precision(self) -> kernels::Precision {
+        match self {
+            Self::FastBf16 => kernels::Precision::Bf16,
+            _ => kernels::Precision::F32,
+        }
+    }
+
+    /// An error naming the missing CPU feature when this selection cannot run as asked here
+    /// (`fast-bf16` without AVX-512 BF16); `None` when it can.
+    pub fn unsupported_here(self) -> Option<String> {
+        (self == Self::FastBf16 && !bf16::available()).then(|| {
+            "--kernels fast-bf16 needs a CPU with AVX-512 BF16 (avx512_bf16); this one has \
+             none: use fast"
+                .to_string()
+        })
+    }
 }
 
 impl std::str::FromStr for Kernels {
@@ -34,7 +65,10 @@ impl std::str::FromStr for Kernels {
         match s.to_ascii_lowercase().as_str() {
             "fast" => Ok(Self::Fast),
             "stock" => Ok(Self::Stock),
-            _ => Err(format!("unknown kernels '{s}' (expected fast or stock)")),
+            "fast-bf16" | "bf16" => Ok(Self::FastBf16),
+            _ => Err(format!(
+                "unknown kernels '{s}' (expected fast, fast-bf16 or stock)"
+            )),
         }
     }
 }
@@ -44,6 +78,7 @@ impl std::fmt::Display for Kernels {
         f.write_str(match self {
             Self::Fast => "fast",
             Self::Stock => "stock",
+            Self::FastBf16 => "fast-bf16",
         })
     }
 }

@@ -20,12 +20,13 @@ use burn::nn::conv::Conv3d;
 use burn::prelude::*;
 use burn::tensor::DType;
 
-use super::kernels::{self, Act, ConvShape, LinearGrads};
+use super::kernels::{self, Act, ConvShape, LinearGrads, Precision};
 
 /// The fused layers of the PoNQ network on the CPU.
 ///
 /// `act` selects LeakyReLU with negative slope `slope` after the bias (and residual); without
-/// it the layer is affine.
+/// it the layer is affine. `bf16` runs the GEMMs (forward and backward) with bf16 inputs and
+/// f32 sums ([`Precision::Bf16`]).
 #[backend_extension(Flex, Autodiff)]
 pub trait PonqCpuOps: burn::backend::Backend {
     /// `act(conv3d(x, w) + b)`, stride 1, zero padding `pad`: `x: [B, D1, D2, D3, Cin]`,
@@ -37,6 +38,7 @@ pub trait PonqCpuOps: burn::backend::Backend {
         pad: usize,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self>;
 
     /// `act(x w^T + b)`: `x: [rows, Cin]`, `w: [Cout, Cin, 1, 1, 1]`, `b: [Cout]`.
@@ -46,6 +48,7 @@ pub trait PonqCpuOps: burn::backend::Backend {
         b: FloatTensor<Self>,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self>;
 
     /// `act(x w^T + b + r)` with a residual `r: [rows, Cout]`.
@@ -56,7 +59,16 @@ pub trait PonqCpuOps: burn::backend::Backend {
         r: FloatTensor<Self>,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self>;
+}
+
+fn precision(bf16: bool) -> Precision {
+    if bf16 {
+        Precision::Bf16
+    } else {
+        Precision::F32
+    }
 }
 
 fn activation(act: bool, slope: f32) -> Act {
@@ -121,9 +133,10 @@ fn conv_forward(
     b: &FlexTensor,
     s: &ConvShape,
     act: Act,
+    prec: Precision,
 ) -> FlexTensor {
     let packed = kernels::pack_weight(&values(w), s, false);
-    let y = kernels::conv_forward(&values(x), s, &packed, Some(&values(b)), act);
+    let y = kernels::conv_forward(&values(x), s, &packed, Some(&values(b)), act, prec);
     let o = s.out_dims();
     tensor(y, vec![s.batch, o[0], o[1], o[2], s.cout])
 }
@@ -134,6 +147,7 @@ fn linear_forward(
     b: &FlexTensor,
     r: Option<&FlexTensor>,
     act: Act,
+    prec: Precision,
 ) -> FlexTensor {
     let xd = dims(x);
     let wd = dims(w);
@@ -149,6 +163,7 @@ fn linear_forward(
         &values(b),
         rv.as_deref(),
         act,
+        prec,
     );
     tensor(y, vec![xd[0], wd[0]])
 }
@@ -161,13 +176,21 @@ impl PonqCpuOps for Flex {
         pad: usize,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FlexTensor {
         let s = conv_shape(&x, &w, pad);
-        conv_forward(&x, &w, &b, &s, activation(act, slope))
+        conv_forward(&x, &w, &b, &s, activation(act, slope), precision(bf16))
     }
 
-    fn linear_cl(x: FlexTensor, w: FlexTensor, b: FlexTensor, act: bool, slope: f32) -> FlexTensor {
-        linear_forward(&x, &w, &b, None, activation(act, slope))
+    fn linear_cl(
+        x: FlexTensor,
+        w: FlexTensor,
+        b: FlexTensor,
+        act: bool,
+        slope: f32,
+        bf16: bool,
+    ) -> FlexTensor {
+        linear_forward(&x, &w, &b, None, activation(act, slope), precision(bf16))
     }
 
     fn linear_residual_cl(
@@ -177,8 +200,16 @@ impl PonqCpuOps for Flex {
         r: FlexTensor,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FlexTensor {
-        linear_forward(&x, &w, &b, Some(&r), activation(act, slope))
+        linear_forward(
+            &x,
+            &w,
+            &b,
+            Some(&r),
+            activation(act, slope),
+            precision(bf16),
+        )
     }
 }
 
@@ -187,13 +218,20 @@ impl PonqCpuOps for Flex {
 struct ConvBackward;
 
 impl Backward<Flex, 3> for ConvBackward {
-    /// `(x, w, y, shape, activation)`.
-    type State = (FlexTensor, FlexTensor, FlexTensor, ConvShape, Act);
+    /// `(x, w, y, shape, activation, precision)`.
+    type State = (
+        FlexTensor,
+        FlexTensor,
+        FlexTensor,
+        ConvShape,
+        Act,
+        Precision,
+    );
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [node_x, node_w, node_b] = ops.parents;
         let gy = grads.consume::<Flex>(&ops.node);
-        let (x, w, y, s, act) = ops.state;
+        let (x, w, y, s, act, prec) = ops.state;
         let gz = kernels::activation_grad(&values(&y), &values(&gy), act);
         if let Some(node) = node_b {
             grads.register::<Flex>(
@@ -202,11 +240,11 @@ impl Backward<Flex, 3> for ConvBackward {
             );
         }
         if let Some(node) = node_w {
-            let gw = kernels::conv_weight_grad(&values(&x), &s, &gz);
+            let gw = kernels::conv_weight_grad(&values(&x), &s, &gz, prec);
             grads.register::<Flex>(node.id, tensor(gw, dims(&w)));
         }
         if let Some(node) = node_x {
-            let gx = kernels::conv_input_grad(&s, &values(&w), &gz);
+            let gx = kernels::conv_input_grad(&s, &values(&w), &gz, prec);
             grads.register::<Flex>(node.id, tensor(gx, dims(&x)));
         }
     }
@@ -217,11 +255,11 @@ impl Backward<Flex, 3> for ConvBackward {
 #[derive(Debug)]
 struct LinearBackward;
 
-/// `(x, w, y, activation)`.
-type LinearState = (FlexTensor, FlexTensor, FlexTensor, Act);
+/// `(x, w, y, activation, precision)`.
+type LinearState = (FlexTensor, FlexTensor, FlexTensor, Act, Precision);
 
 fn linear_grads(state: LinearState, gy: FlexTensor, need: kernels::LinearNeeds) -> LinearGrads {
-    let (x, w, y, act) = state;
+    let (x, w, y, act, prec) = state;
     let xd = dims(&x);
     let wd = dims(&w);
     kernels::linear_grads(
@@ -233,6 +271,7 @@ fn linear_grads(state: LinearState, gy: FlexTensor, need: kernels::LinearNeeds) 
         act,
         wd[0],
         need,
+        prec,
     )
 }
 
@@ -300,8 +339,10 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         pad: usize,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self> {
         let act = activation(act, slope);
+        let prec = precision(bf16);
         let s = conv_shape(x.primitive(), w.primitive(), pad);
         match ConvBackward
             .prepare::<C>([x.node(), w.node(), b.node()])
@@ -310,8 +351,8 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         {
             OpsKind::Tracked(prep) => {
                 let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
-                let y = conv_forward(&xp, &wp, b.primitive(), &s, act);
-                prep.finish((xp, wp, y.clone(), s, act), y)
+                let y = conv_forward(&xp, &wp, b.primitive(), &s, act, prec);
+                prep.finish((xp, wp, y.clone(), s, act, prec), y)
             }
             OpsKind::UnTracked(prep) => prep.finish(conv_forward(
                 x.primitive(),
@@ -319,6 +360,7 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
                 b.primitive(),
                 &s,
                 act,
+                prec,
             )),
         }
     }
@@ -329,8 +371,10 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         b: FloatTensor<Self>,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self> {
         let act = activation(act, slope);
+        let prec = precision(bf16);
         match LinearBackward
             .prepare::<C>([x.node(), w.node(), b.node()])
             .compute_bound()
@@ -338,8 +382,8 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         {
             OpsKind::Tracked(prep) => {
                 let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
-                let y = linear_forward(&xp, &wp, b.primitive(), None, act);
-                prep.finish((xp, wp, y.clone(), act), y)
+                let y = linear_forward(&xp, &wp, b.primitive(), None, act, prec);
+                prep.finish((xp, wp, y.clone(), act, prec), y)
             }
             OpsKind::UnTracked(prep) => prep.finish(linear_forward(
                 x.primitive(),
@@ -347,6 +391,7 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
                 b.primitive(),
                 None,
                 act,
+                prec,
             )),
         }
     }
@@ -358,8 +403,10 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         r: FloatTensor<Self>,
         act: bool,
         slope: f32,
+        bf16: bool,
     ) -> FloatTensor<Self> {
         let act = activation(act, slope);
+        let prec = precision(bf16);
         match LinearResidualBackward
             .prepare::<C>([x.node(), w.node(), b.node(), r.node()])
             .compute_bound()
@@ -367,8 +414,8 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
         {
             OpsKind::Tracked(prep) => {
                 let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
-                let y = linear_forward(&xp, &wp, b.primitive(), Some(r.primitive()), act);
-                prep.finish((xp, wp, y.clone(), act), y)
+                let y = linear_forward(&xp, &wp, b.primitive(), Some(r.primitive()), act, prec);
+                prep.finish((xp, wp, y.clone(), act, prec), y)
             }
             OpsKind::UnTracked(prep) => prep.finish(linear_forward(
                 x.primitive(),
@@ -376,6 +423,7 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
                 b.primitive(),
                 Some(r.primitive()),
                 act,
+                prec,
             )),
         }
     }
@@ -392,8 +440,14 @@ fn params(conv: &Conv3d) -> (Tensor<5>, Tensor<1>) {
 }
 
 /// `conv`'s weights on a channels-last grid batch `[B, D1, D2, D3, Cin]`, stride 1, zero
-/// padding `pad`, then LeakyReLU with slope `leaky` when given.
-pub fn conv3d(x: Tensor<5>, conv: &Conv3d, pad: usize, leaky: Option<f32>) -> Tensor<5> {
+/// padding `pad`, then LeakyReLU with slope `leaky` when given; GEMMs in `prec`.
+pub fn conv3d(
+    x: Tensor<5>,
+    conv: &Conv3d,
+    pad: usize,
+    leaky: Option<f32>,
+    prec: Precision,
+) -> Tensor<5> {
     let (w, b) = params(conv);
     Tensor::from_dispatch(<Dispatch as PonqCpuOps>::conv3d_cl(
         x.into_dispatch(),
@@ -402,19 +456,22 @@ pub fn conv3d(x: Tensor<5>, conv: &Conv3d, pad: usize, leaky: Option<f32>) -> Te
         pad,
         leaky.is_some(),
         leaky.unwrap_or(0.0),
+        prec == Precision::Bf16,
     ))
 }
 
 /// A 1x1x1 `conv` on rows `[rows, Cin]`, plus `residual` `[rows, Cout]` when given, then
-/// LeakyReLU with slope `leaky` when given.
+/// LeakyReLU with slope `leaky` when given; GEMMs in `prec`.
 pub fn linear(
     x: Tensor<2>,
     conv: &Conv3d,
     residual: Option<Tensor<2>>,
     leaky: Option<f32>,
+    prec: Precision,
 ) -> Tensor<2> {
     let (w, b) = params(conv);
     let (act, slope) = (leaky.is_some(), leaky.unwrap_or(0.0));
+    let bf16 = prec == Precision::Bf16;
     Tensor::from_dispatch(match residual {
         Some(r) => <Dispatch as PonqCpuOps>::linear_residual_cl(
             x.into_dispatch(),
@@ -423,6 +480,7 @@ pub fn linear(
             r.into_dispatch(),
             act,
             slope,
+            bf16,
         ),
         None => <Dispatch as PonqCpuOps>::linear_cl(
             x.into_dispatch(),
@@ -430,6 +488,7 @@ pub fn linear(
             b.into_dispatch(),
             act,
             slope,
+            bf16,
         ),
     })
 }

@@ -18,7 +18,7 @@
 
 use rayon::prelude::*;
 
-use super::kernels::{Act, col_times_weights, epilogue, tile_rows};
+use super::kernels::{Act, Precision, Weights, epilogue, tile_rows};
 
 /// No row: the cell is not active at this level.
 const ABSENT: u32 = u32::MAX;
@@ -120,6 +120,7 @@ fn gather_gemm(
     packed: &[f32],
     bias: &[f32],
     act: Act,
+    prec: Precision,
     fill: impl Fn(usize, &mut [f32]) + Sync,
 ) -> Vec<f32> {
     let cout = bias.len();
@@ -129,6 +130,7 @@ fn gather_gemm(
         return y;
     }
     let tile = tile_rows(kd);
+    let weights = Weights::new(packed, kd, cout, prec);
     y.par_chunks_mut(tile * cout).enumerate().for_each_init(
         || vec![0.0f32; tile * kd],
         |col, (t, yt)| {
@@ -136,7 +138,7 @@ fn gather_gemm(
             for (r, &c) in dst[t * tile..t * tile + m].iter().enumerate() {
                 fill(c as usize, &mut col[r * kd..(r + 1) * kd]);
             }
-            col_times_weights(col, packed, kd, yt);
+            weights.mul(col, kd, yt);
             epilogue(yt, cout, bias, None, act);
         },
     );
@@ -148,12 +150,13 @@ fn gather_gemm(
 /// 3x3x3 layer `l` at `levels[l]`. `layers[0]` is the input layer; each entry is `(packed
 /// weight, bias)` with the weight packed by [`super::kernels::pack_weight`] (not flipped) and
 /// `bias.len()` output channels. Returns the features `[levels[L].len(), width]` of the last
-/// level's cells, in its order.
+/// level's cells, in its order. GEMMs in `prec`.
 pub fn encode(
     nodes: &[f32],
     sets: &ActiveSets,
     layers: &[(Vec<f32>, Vec<f32>)],
     act: Act,
+    prec: Precision,
 ) -> Vec<f32> {
     let dims = sets.dims;
     let n = dims.map(|d| d + 1);
@@ -161,7 +164,7 @@ pub fn encode(
     assert_eq!(layers.len(), sets.levels.len());
     // The input layer: the eight nodes of each cell, in the kernel's (a, b, c) order.
     let (w0, b0) = &layers[0];
-    let mut x = gather_gemm(&sets.levels[0], 8, w0, b0, act, |cell, row| {
+    let mut x = gather_gemm(&sets.levels[0], 8, w0, b0, act, prec, |cell, row| {
         let [i, j, k] = coords(cell, dims);
         for a in 0..2 {
             for b in 0..2 {
@@ -176,7 +179,7 @@ pub fn encode(
         let src = sets.index(l - 1);
         let input = &x;
         let kd = 27 * cin;
-        let y = gather_gemm(&sets.levels[l], kd, w, b, act, |cell, row| {
+        let y = gather_gemm(&sets.levels[l], kd, w, b, act, prec, |cell, row| {
             let [i, j, k] = coords(cell, dims);
             for a in 0..3 {
                 for bb in 0..3 {
@@ -232,6 +235,7 @@ mod tests {
         dims: [usize; 3],
         params: &[(Vec<f32>, Vec<f32>)],
         act: Act,
+        prec: Precision,
     ) -> Vec<f32> {
         let n = dims.map(|d| d + 1);
         let s0 = ConvShape {
@@ -248,6 +252,7 @@ mod tests {
             &pack_weight(&params[0].0, &s0, false),
             Some(&params[0].1),
             act,
+            prec,
         );
         let mut cin = s0.cout;
         for (w, b) in &params[1..] {
@@ -259,7 +264,7 @@ mod tests {
                 k: 3,
                 pad: 1,
             };
-            x = conv_forward(&x, &s, &pack_weight(w, &s, false), Some(b), act);
+            x = conv_forward(&x, &s, &pack_weight(w, &s, false), Some(b), act, prec);
             cin = b.len();
         }
         x
@@ -287,58 +292,60 @@ mod tests {
                     rand(width, seed + 50 + l as u64),
                 ));
             }
-            let want = dense(&nodes, dims, &raw, act);
-            let total: usize = dims.iter().product();
-            // Needed: a sparse, repeated, unordered subset incl. grid corners.
-            let needed: Vec<usize> = (0..total)
-                .rev()
-                .filter(|c| c % 7 == 0 || c % 11 == 3)
-                .chain([0, total - 1, 0])
-                .collect();
-            let sets = ActiveSets::new(dims, &needed, layers);
-            assert_eq!(sets.levels.len(), layers + 1);
-            for w in sets.levels.windows(2) {
-                assert!(
-                    w[1].iter().all(|c| w[0].binary_search(c).is_ok()),
-                    "levels nest"
-                );
-            }
-            let packed: Vec<(Vec<f32>, Vec<f32>)> = raw
-                .iter()
-                .enumerate()
-                .map(|(l, (w, b))| {
-                    let (cin, k) = if l == 0 { (1, 2) } else { (width, 3) };
-                    let s = ConvShape {
-                        batch: 1,
-                        dims,
-                        cin,
-                        cout: width,
-                        k,
-                        pad: 0,
-                    };
-                    (pack_weight(w, &s, false), b.clone())
-                })
-                .collect();
-            let got = encode(&nodes, &sets, &packed, act);
-            let rows = sets
-                .rows_of(&needed)
-                .expect("needed cells are in the last level");
-            for (&c, &r) in needed.iter().zip(&rows) {
-                for ch in 0..width {
-                    let (g, w) = (got[r * width + ch], want[c * width + ch]);
+            for prec in [Precision::F32, Precision::Bf16] {
+                let want = dense(&nodes, dims, &raw, act, prec);
+                let total: usize = dims.iter().product();
+                // Needed: a sparse, repeated, unordered subset incl. grid corners.
+                let needed: Vec<usize> = (0..total)
+                    .rev()
+                    .filter(|c| c % 7 == 0 || c % 11 == 3)
+                    .chain([0, total - 1, 0])
+                    .collect();
+                let sets = ActiveSets::new(dims, &needed, layers);
+                assert_eq!(sets.levels.len(), layers + 1);
+                for w in sets.levels.windows(2) {
                     assert!(
-                        (g - w).abs() <= 1e-5 * (1.0 + w.abs()),
-                        "case {case} cell {c} ch {ch}: {g} vs {w}"
+                        w[1].iter().all(|c| w[0].binary_search(c).is_ok()),
+                        "levels nest"
                     );
                 }
+                let packed: Vec<(Vec<f32>, Vec<f32>)> = raw
+                    .iter()
+                    .enumerate()
+                    .map(|(l, (w, b))| {
+                        let (cin, k) = if l == 0 { (1, 2) } else { (width, 3) };
+                        let s = ConvShape {
+                            batch: 1,
+                            dims,
+                            cin,
+                            cout: width,
+                            k,
+                            pad: 0,
+                        };
+                        (pack_weight(w, &s, false), b.clone())
+                    })
+                    .collect();
+                let got = encode(&nodes, &sets, &packed, act, prec);
+                let rows = sets
+                    .rows_of(&needed)
+                    .expect("needed cells are in the last level");
+                for (&c, &r) in needed.iter().zip(&rows) {
+                    for ch in 0..width {
+                        let (g, w) = (got[r * width + ch], want[c * width + ch]);
+                        assert!(
+                            (g - w).abs() <= 1e-5 * (1.0 + w.abs()),
+                            "case {case} {prec:?} cell {c} ch {ch}: {g} vs {w}"
+                        );
+                    }
+                }
+                // Fewer rows than the grid at the last level unless everything is needed.
+                assert_eq!(sets.levels[layers].len(), {
+                    let mut u = needed.clone();
+                    u.sort_unstable();
+                    u.dedup();
+                    u.len()
+                });
             }
-            // Fewer rows than the grid at the last level unless everything is needed.
-            assert_eq!(sets.levels[layers].len(), {
-                let mut u = needed.clone();
-                u.sort_unstable();
-                u.dedup();
-                u.len()
-            });
         }
     }
 

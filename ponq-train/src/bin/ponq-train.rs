@@ -38,9 +38,12 @@ struct Args {
     /// run may resume with another device count. Several devices need `--backend cuda`.
     #[arg(long, default_value = "0")]
     devices: String,
-    /// Layer implementation on the CPU: fast (custom kernels, default) or stock (Burn's
-    /// Conv3d layers). Same weights, same numbers up to float rounding; GPU backends always
-    /// use the stock layers.
+    /// Layer implementation on the CPU: fast (custom kernels, default), fast-bf16 (the same
+    /// with bf16 GEMM inputs and f32 sums: AMX tiles or AVX-512 BF16, an error on CPUs
+    /// without) or stock (Burn's Conv3d layers). Same weights; fast and stock give the same
+    /// numbers up to float rounding, fast-bf16 within bf16 rounding. GPU backends always use
+    /// the stock layers. A resumed run repeats the interrupted one exactly only with the same
+    /// kernels.
     #[arg(long, default_value = "fast")]
     kernels: ponq_model::Kernels,
     /// Worker threads for the CPU backend and the data pipeline [default: all cores].

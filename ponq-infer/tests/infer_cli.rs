@@ -399,3 +399,47 @@ fn missing_backends_are_clear_errors() {
     assert!(!err.contains("panicked"), "{err}");
     std::fs::remove_dir_all(&d).ok();
 }
+
+#[test]
+fn bf16_kernels_give_a_valid_mesh_or_a_clear_error() {
+    let d = tmp("bf16");
+    let g = box_grid(16, [0.5, 0.35, 0.4], 0.3);
+    write_npy_grid_f32(d.join("box.npy"), &g).unwrap();
+    let run = |kernels: &str, out: &str| {
+        Command::new(infer_exe())
+            .arg(d.join("box.npy"))
+            .arg("-o")
+            .arg(d.join(out))
+            .args(["--kernels", kernels])
+            .output()
+            .unwrap()
+    };
+    let o = run("fast-bf16", "bf16.obj");
+    if !ponq_model::fast::bf16::available() {
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("AVX-512 BF16"), "{err}");
+        return;
+    }
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let f = run("fast", "f32.obj");
+    assert!(f.status.success(), "{}", String::from_utf8_lossy(&f.stderr));
+    let mb = ponq_mesh::io::read_mesh(d.join("bf16.obj")).unwrap();
+    let mf = ponq_mesh::io::read_mesh(d.join("f32.obj")).unwrap();
+    let r = ponq_mesh::validity::check(&mb);
+    assert!(r.is_valid(), "{r}");
+    // The same surface up to bf16 rounding of the network: vertex counts within 10%, and
+    // every bf16 vertex within a quarter cell of the f32 mesh's nearest vertex.
+    let (nb, nf) = (mb.vertices.len() as f64, mf.vertices.len() as f64);
+    assert!((nb - nf).abs() <= 0.1 * nf, "{nb} vs {nf} vertices");
+    let cell = 2.0 / 16.0;
+    for v in &mb.vertices {
+        let near = mf
+            .vertices
+            .iter()
+            .map(|w| (0..3).map(|a| (v[a] - w[a]).powi(2)).sum::<f64>().sqrt())
+            .fold(f64::MAX, f64::min);
+        assert!(near < 0.25 * cell, "vertex {v:?}: {near} from the f32 mesh");
+    }
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -1,14 +1,16 @@
 //! The network on the CPU, side by side in one process: Burn's stock layers against the fast
-//! CPU kernels (`ponq_model::fast`), forward and training step, with their GFLOP/s, peak
-//! memory, and the machine's GEMM rate (one large `gemm` call) as the ceiling.
+//! CPU kernels (`ponq_model::fast`, f32, and bf16 where the CPU has AMX or AVX-512 BF16),
+//! forward and training step, with their GFLOP/s, peak memory, and the machine's f32 GEMM
+//! rate (one large `gemm` call) as the ceiling.
 //!
-//! `cargo bench -p ponq-train --bench train_bench [REPS] [paper|cpu]` (default 3 repetitions,
-//! medians, both cases; the stock and fast runs alternate so that the machine's drift hits
+//! `cargo bench -p ponq-train --bench train_bench [REPS] [paper|cpu|w48]` (default 3
+//! repetitions, medians, all cases; the stock and fast runs alternate so that the machine's drift hits
 //! both alike).
 //! `ponq-train/benches/side_by_side.sh` also runs the same network in PyTorch.
 //!
-//! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipe's
-//! network (`configs/cpu.toml`, width 32) on 17^3-node crops, batch 1 and 8.
+//! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipes'
+//! networks (`configs/cpu.toml`, width 32, and the shipped `configs/cpu-w48.toml`, width 48) on
+//! 17^3-node crops, batch 1 and 8 (width 48: 8).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -171,7 +173,10 @@ fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: us
     .expect("batch");
     let ad = dev.autodiff();
     let xa = Batcher { device: ad.clone() }.batch(&its).expect("batch");
-    let kinds = [Kernels::Stock, Kernels::Fast];
+    let mut kinds = vec![Kernels::Stock, Kernels::Fast];
+    if ponq_model::fast::bf16::available() {
+        kinds.push(Kernels::FastBf16);
+    }
     let mut rows: Vec<Row> = kinds
         .iter()
         .map(|_| Row {
@@ -242,9 +247,12 @@ fn main() {
         .find_map(|a| a.parse::<usize>().ok())
         .unwrap_or(3)
         .max(1);
-    // Case filter: `paper` or `cpu` (default both).
+    // Case filter: `paper`, `cpu` or `w48` (default all).
     let want = |case: &str| {
-        !args.iter().any(|a| a == "paper" || a == "cpu") || args.iter().any(|a| a == case)
+        !args
+            .iter()
+            .any(|a| ["paper", "cpu", "w48"].contains(&a.as_str()))
+            || args.iter().any(|a| a == case)
     };
     println!(
         "GEMM ceiling (one 32768 x 3456 x 128 gemm call, {} threads): {:.0} GFLOP/s\n",
@@ -273,6 +281,10 @@ fn main() {
     };
     if want("cpu") {
         bench("cpu.toml (width 32)", cpu.clone(), 1, 16, 16_000, reps);
-        bench("cpu.toml (width 32)", cpu, 8, 16, 16_000, reps);
+        bench("cpu.toml (width 32)", cpu.clone(), 8, 16, 16_000, reps);
+    }
+    if want("w48") {
+        let w48 = ModelSection { width: 48, ..cpu };
+        bench("cpu-w48.toml (width 48)", w48, 8, 16, 16_000, reps);
     }
 }

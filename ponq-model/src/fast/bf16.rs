@@ -143,27 +143,10 @@ pub unsafe fn gemm(
     rhs: &[f32],
     (rhs_rs, rhs_cs): (usize, usize),
 ) {
-    if m == 0 || n == 0 {
-        return;
-    }
-    assert!((m - 1) * dst_rs + n <= dst.len());
-    if k == 0 {
-        if !accumulate {
-            for r in 0..m {
-                dst[r * dst_rs..r * dst_rs + n].fill(0.0);
-            }
-        }
-        return;
-    }
-    assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len());
-    assert!((k - 1) * rhs_rs + (n - 1) * rhs_cs < rhs.len());
-    let Some(engine) = engine() else {
-        panic!("bf16::gemm called on a CPU without a bf16 engine");
-    };
-    // SAFETY: the engine was detected; the caller's extents.
+    // SAFETY: the caller's extents (checked inside).
     unsafe {
         gemm_on(
-            engine,
+            detected(),
             m,
             n,
             k,
@@ -175,6 +158,12 @@ pub unsafe fn gemm(
             Rhs::Strided(rhs, rhs_rs, rhs_cs),
         )
     }
+}
+
+/// The detected engine; a bf16 GEMM on a CPU without one is a caller's bug (see
+/// [`available`]).
+fn detected() -> Engine {
+    engine().expect("bf16 GEMM on a CPU without a bf16 engine (check bf16::available)")
 }
 
 /// [`gemm`] on a given engine.
@@ -194,10 +183,18 @@ unsafe fn gemm_on(
     (lhs_rs, lhs_cs): (usize, usize),
     rhs: Rhs,
 ) {
-    if m == 0 || n == 0 || k == 0 {
+    if m == 0 || n == 0 {
         return;
     }
     assert!((m - 1) * dst_rs + n <= dst.len());
+    if k == 0 {
+        if !accumulate {
+            for r in 0..m {
+                dst[r * dst_rs..r * dst_rs + n].fill(0.0);
+            }
+        }
+        return;
+    }
     assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len());
     match rhs {
         Rhs::Strided(b, rs, cs) => assert!((k - 1) * rs + (n - 1) * cs < b.len()),
@@ -326,25 +323,11 @@ pub unsafe fn gemm_packed(
     lhs_strides: (usize, usize),
     b: &PackedB,
 ) {
-    let Some(engine) = engine() else {
-        panic!("bf16::gemm_packed called on a CPU without a bf16 engine");
-    };
     let (k, n) = b.dims();
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        if !accumulate {
-            for r in 0..m {
-                dst[r * dst_rs..r * dst_rs + n].fill(0.0);
-            }
-        }
-        return;
-    }
-    // SAFETY: the engine was detected; extents checked inside.
+    // SAFETY: the caller's extents (checked inside).
     unsafe {
         gemm_on(
-            engine,
+            detected(),
             m,
             n,
             k,
@@ -765,21 +748,8 @@ unsafe fn micro<const V: usize>(
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
+    use super::super::kernels::tests::lcg;
     use super::*;
-
-    fn lcg(seed: u64, n: usize) -> Vec<f32> {
-        let mut s = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
 
     /// Packing `B` once gives the same bits as packing it per call.
     #[test]
@@ -832,6 +802,7 @@ mod tests {
         for engine in engines {
             for &(m, n, k) in &[
                 (1, 1, 1),
+                (3, 4, 0),
                 (13, 17, 3),
                 (12, 32, 64),
                 (97, 48, 515),

@@ -847,10 +847,10 @@ pub fn conv_input_grad(s: &ConvShape, w: &[f32], gz: &[f32], prec: Precision) ->
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    fn lcg(seed: u64, n: usize) -> Vec<f32> {
+    pub(in crate::fast) fn lcg(seed: u64, n: usize) -> Vec<f32> {
         let mut s = seed
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);

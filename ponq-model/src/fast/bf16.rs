@@ -8,9 +8,9 @@
 //!   (Intel Sapphire Rapids and later). Linux grants the tile state per process
 //!   (`arch_prctl(ARCH_REQ_XCOMP_PERM)`), asked for once here; the tile instructions are
 //!   written as inline assembly because Rust's AMX intrinsics are not stable.
-//! - **AVX-512 BF16** (`vdpbf16ps`, 16 lanes of pair dot products) where AMX is absent. On
-//!   CPUs with both, this one runs at about half the f32 GEMM's rate: it is the fallback, not a
-//!   speed-up.
+//! - **AVX-512 BF16** (`vdpbf16ps`, 16 lanes of pair dot products) where AMX is absent (or the
+//!   environment sets `PONQ_NO_AMX`). On CPUs with both, this one runs at about half the f32
+//!   GEMM's rate: it is the fallback, not a speed-up.
 //!
 //! Why by hand: the `gemm` crate (the f32 path) has no bf16 kernel with f32 accumulation, and
 //! no maintained pure-Rust crate drives AMX.

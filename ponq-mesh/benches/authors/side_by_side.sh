@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# ponq-mesh side by side with the authors' Python mesher on new PoNQ files made from shared CAD
+# meshes (`ponq-fit --save-ponq` at 32^3 and 64^3), both scored by `ponq-eval compare` against the
+# source mesh and checked by `ponq-eval check` (README, mesher section).
+#
+#   AUTHORS_PONQ=/path/to/PoNQ/src/utils ponq-mesh/benches/authors/side_by_side.sh [OUT_DIR] [MESH ...]
+#
+# MESH: paths under ../shared/data/meshes/cad without .obj (default: the eight of the README).
+# Needs a checkout of the authors' repository (github.com/nissmar/PoNQ) and Debian's
+# python3-torch, python3-scipy, python3-networkx; release binaries (cargo build --release --bins).
+set -euo pipefail
+cd "$(dirname "$0")/../../.."
+here=ponq-mesh/benches/authors
+out=${1:-target/authors-side-by-side}
+shift || true
+meshes=("$@")
+if [ ${#meshes[@]} -eq 0 ]; then
+  meshes=(openscad_examples/Old_example002 openscad_examples/Old_example003
+    openscad_examples/Old_example004 openscad_examples/Old_example005
+    openscad_examples/Old_example007 openscad_examples/Old_example010
+    openscad_examples/Basics_rotate_extrude freecad_step/freecad_idf_EPL22_6_16)
+fi
+py=${PYTHON:-/usr/bin/python3}
+if ! "$py" -c "import torch, scipy, networkx" 2>/dev/null; then
+  echo "$py lacks torch / scipy / networkx: apt-get install python3-torch python3-scipy python3-networkx" >&2
+  exit 1
+fi
+mkdir -p "$out"
+src=../shared/data/meshes/cad
+bin=target/release
+for m in "${meshes[@]}"; do
+  n=$(basename "$m")
+  for r in 32 64; do
+    p="$out/${n}_$r.npz"
+    [ -f "$p" ] || "$bin/ponq-fit" "$src/$m.obj" -o "$out/fit.obj" --grid "$r" --save-ponq "$p" -q
+    echo "$n $r authors: $("$py" "$here/authors_mesh.py" "$p" "$r" "$out/${n}_$r.authors.obj" | tail -1)"
+    "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.ours.obj" --grid-scale "$r" -q
+    "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.noflip.obj" --grid-scale "$r" --no-crease-flips -q
+  done
+done
+"$py" "$here/score.py" "$out" "$src" "$bin/ponq-eval"

@@ -511,10 +511,11 @@ pub fn linear_grads(
         out.resize_with(n, || None);
         out
     }
-    let w_dx = Weights::new(w, cout, cin, prec);
+    // W for dX, packed once (only when dX is asked for).
+    let w_dx = need.x.then(|| Weights::new(w, cout, cin, prec));
     let gz_parts = split(&mut gz, part_rows * cout, ranges.len());
     let gx_parts = split(&mut gx, part_rows * cin, ranges.len());
-    let wt_needed = need.w || need.b;
+    let reductions = need.w || need.b;
     let partials: Vec<(Vec<f32>, Vec<f64>)> = ranges
         .par_iter()
         .zip(gz_parts)
@@ -544,7 +545,7 @@ pub fn linear_grads(
                         }
                     }
                 }
-                if let Some(p) = gx_part.as_deref_mut() {
+                if let (Some(p), Some(w_dx)) = (gx_part.as_deref_mut(), &w_dx) {
                     // dZ tile [m, cout] times W [cout, cin] into [m, cin].
                     w_dx.mul(gzt, cout, &mut p[(r0 - a) * cin..(r0 - a + m) * cin]);
                 }
@@ -578,7 +579,7 @@ pub fn linear_grads(
         x: gx,
         ..Default::default()
     };
-    if wt_needed {
+    if reductions {
         let (gws, gbs): (Vec<_>, Vec<_>) = partials.into_iter().unzip();
         if need.w {
             out.w = Some(sum_partials(gws, cout * cin));

@@ -52,8 +52,8 @@ impl Kernels {
     /// (`fast-bf16` without AVX-512 BF16); `None` when it can.
     pub fn unsupported_here(self) -> Option<String> {
         (self == Self::FastBf16 && !bf16::available()).then(|| {
-            "--kernels fast-bf16 needs a CPU with AVX-512 BF16 (avx512_bf16); this one has \
-             none: use fast"
+            "--kernels fast-bf16 needs a CPU with AMX-BF16 or AVX-512 BF16 (avx512_bf16); this \
+             one has neither: use fast"
                 .to_string()
         })
     }

@@ -9,7 +9,6 @@ use burn::nn::conv::{Conv3d, Conv3dConfig};
 use burn::prelude::*;
 use burn::tensor::activation::{leaky_relu, sigmoid};
 
-use crate::fast::kernels::Precision;
 use crate::fast::{self, Kernels};
 
 /// Slope of every LeakyReLU of the network.
@@ -53,13 +52,6 @@ impl ResBlock {
         let y = leaky_relu(self.conv_1.forward(x.clone()), LEAKY_SLOPE);
         leaky_relu(self.conv_2.forward(y) + x, LEAKY_SLOPE)
     }
-
-    /// The same block on channels-last rows `[rows, W]` with the fast kernels.
-    fn forward_fast(&self, x: Tensor<2>, p: Precision) -> Tensor<2> {
-        let s = Some(LEAKY_SLOPE as f32);
-        let y = fast::ops::linear(x.clone(), &self.conv_1, None, s, p);
-        fast::ops::linear(y, &self.conv_2, Some(x), s, p)
-    }
 }
 
 /// One decoder: residual blocks then a 1x1x1 head with `outputs` channels.
@@ -91,23 +83,15 @@ impl Decoder {
             .reshape([batch, d1 * d2 * d3, channels / dim, dim])
     }
 
-    /// The same decoder on channels-last rows `[B * cells, W]` with the fast kernels; the
-    /// rows of a batch item are its cells in C order, so the head's `[rows, outputs]` is
-    /// already `[B, cells, outputs / dim, dim]`.
-    fn forward_fast(
-        &self,
-        features: Tensor<2>,
-        batch: usize,
-        dim: usize,
-        p: Precision,
-    ) -> Tensor<4> {
-        let mut x = features;
-        for b in &self.blocks {
-            x = b.forward_fast(x, p);
-        }
-        let y = fast::ops::linear(x, &self.head, None, None, p);
-        let [rows, channels] = y.dims();
-        y.reshape([batch, rows / batch, channels / dim, dim])
+    /// Its layers in the order of [`fast::decoders::DecoderShape`]'s flat parameters.
+    fn layers(&self) -> Vec<&Conv3d> {
+        let mut l: Vec<&Conv3d> = self
+            .blocks
+            .iter()
+            .flat_map(|b| [&b.conv_1, &b.conv_2])
+            .collect();
+        l.push(&self.head);
+        l
     }
 }
 
@@ -318,18 +302,34 @@ impl PonqNet {
         )
     }
 
-    /// The five decoders on channels-last feature rows `[batch * cells, W]` (fast kernels).
+    /// The five decoders on channels-last feature rows `[batch * cells, W]` (fast kernels):
+    /// one fused operation ([`fast::decoders`]); the rows of a batch item are its cells in C
+    /// order, so each head's columns are already `[B, cells, outputs / dim, dim]`.
     fn decode_rows(&self, rows: Tensor<2>, batch: usize) -> [Tensor<4>; 5] {
-        let d = |dec: &Decoder, dim| {
-            dec.forward_fast(rows.clone(), batch, dim, self.kernels.precision())
+        let decoders = [
+            (&self.decoder_points, 3),
+            (&self.decoder_vstars, 3),
+            (&self.decoder_normals, 3),
+            (&self.decoder_cholesky, 6),
+            (&self.decoder_occupancy, 1),
+        ];
+        let shape = fast::decoders::DecoderShape {
+            width: rows.dims()[1],
+            blocks: self.decoder_points.blocks.len(),
+            outputs: decoders.map(|(d, _)| d.head.weight.dims()[0]),
         };
-        [
-            d(&self.decoder_points, 3),
-            d(&self.decoder_vstars, 3),
-            d(&self.decoder_normals, 3),
-            d(&self.decoder_cholesky, 6),
-            d(&self.decoder_occupancy, 1),
-        ]
+        let layers: Vec<&Conv3d> = decoders.iter().flat_map(|(d, _)| d.layers()).collect();
+        let theta = fast::ops::decoder_params(&layers);
+        let y = fast::ops::decoders(rows, theta, shape, self.kernels.precision());
+        let n = y.dims()[0];
+        let mut d = 0;
+        decoders.map(|(_, dim)| {
+            let (off, od) = (shape.output_offset(d), shape.outputs[d]);
+            d += 1;
+            y.clone()
+                .narrow(1, off, od)
+                .reshape([batch, n / batch, od / dim, dim])
+        })
     }
 
     /// [`PonqNet::forward`] on one grid `[1, 1, n1+1, n2+1, n3+1]`, at the listed cells only

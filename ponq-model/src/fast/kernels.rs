@@ -32,7 +32,7 @@ pub enum Act {
 
 impl Act {
     #[inline]
-    fn apply(self, z: f32) -> f32 {
+    pub(super) fn apply(self, z: f32) -> f32 {
         match self {
             Act::Identity => z,
             Act::Leaky(s) => {
@@ -48,7 +48,7 @@ impl Act {
     /// Derivative at the pre-activation whose activation is `y` (`y > 0` exactly when the
     /// pre-activation is: the slope is positive).
     #[inline]
-    fn slope_at_output(self, y: f32) -> f32 {
+    pub(super) fn slope_at_output(self, y: f32) -> f32 {
         match self {
             Act::Identity => 1.0,
             Act::Leaky(s) => {
@@ -274,10 +274,10 @@ pub fn activation_grad(y: &[f32], gy: &[f32], act: Act) -> Vec<f32> {
 /// Reductions over rows are split into this many parts, whatever the thread count, and the
 /// parts are summed in order: results are the same on every machine and thread count (exact
 /// resume of a training run depends on it).
-const PARTS: usize = 8;
+pub(super) const PARTS: usize = 8;
 
 /// Row ranges of the [`PARTS`] parts of `rows` rows (in units of `unit` rows).
-fn parts(rows: usize, unit: usize) -> Vec<(usize, usize)> {
+pub(super) fn parts(rows: usize, unit: usize) -> Vec<(usize, usize)> {
     let units = rows.div_ceil(unit.max(1));
     let per = units.div_ceil(PARTS).max(1);
     (0..units.div_ceil(per))
@@ -315,7 +315,7 @@ pub fn column_sums(g: &[f32], n: usize) -> Vec<f32> {
 const LINEAR_TILE: usize = 512;
 
 /// `[r, c]` row-major -> `[c, r]` row-major.
-fn transpose(a: &[f32], r: usize, c: usize) -> Vec<f32> {
+pub(super) fn transpose(a: &[f32], r: usize, c: usize) -> Vec<f32> {
     let mut t = vec![0.0f32; a.len()];
     for i in 0..r {
         for j in 0..c {

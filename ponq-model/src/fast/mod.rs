@@ -4,7 +4,9 @@
 //!
 //! - [`kernels`]: the kernels on slices (im2col GEMM convolutions and 1x1x1 GEMMs with
 //!   bias, LeakyReLU and the residual add fused; their backward passes), f32 or bf16 GEMMs;
-//! - [`bf16`]: the bf16 GEMM with f32 sums (AVX-512 BF16, runtime detected);
+//! - [`decoders`]: the five decoders fused per row tile of the shared features (their first
+//!   layers as one GEMM; the backward pass recomputes a tile's activations in cache);
+//! - [`bf16`]: the bf16 GEMM with f32 sums (AMX or AVX-512 BF16, runtime detected);
 //! - [`ops`]: those kernels as a Burn backend extension for `flex` and `Autodiff<flex>`, and
 //!   the `Tensor` wrappers the network calls;
 //! - [`sparse`]: the encoder at the cells near the surface only (inference).
@@ -14,6 +16,7 @@
 //! give the same numbers within float rounding (tested).
 
 pub mod bf16;
+pub mod decoders;
 pub mod kernels;
 pub mod ops;
 pub mod sparse;

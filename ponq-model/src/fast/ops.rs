@@ -20,6 +20,7 @@ use burn::nn::conv::Conv3d;
 use burn::prelude::*;
 use burn::tensor::DType;
 
+use super::decoders::{self, DecoderShape};
 use super::kernels::{self, Act, ConvShape, LinearGrads, Precision};
 
 /// The fused layers of the PoNQ network on the CPU.
@@ -59,6 +60,15 @@ pub trait PonqCpuOps: burn::backend::Backend {
         r: FloatTensor<Self>,
         act: bool,
         slope: f32,
+        bf16: bool,
+    ) -> FloatTensor<Self>;
+
+    /// The five decoders fused ([`decoders`]): `x: [rows, W]`, `theta: [shape.params()]` ->
+    /// `[rows, shape.total_outputs()]`.
+    fn decoders_cl(
+        x: FloatTensor<Self>,
+        theta: FloatTensor<Self>,
+        shape: DecoderShape,
         bf16: bool,
     ) -> FloatTensor<Self>;
 }
@@ -168,7 +178,32 @@ fn linear_forward(
     tensor(y, vec![xd[0], wd[0]])
 }
 
+fn decoders_forward(
+    x: &FlexTensor,
+    theta: &FlexTensor,
+    shape: &DecoderShape,
+    prec: Precision,
+) -> FlexTensor {
+    let xd = dims(x);
+    assert!(
+        xd.len() == 2 && xd[1] == shape.width && dims(theta) == [shape.params()],
+        "decoders_cl: x {xd:?}, theta {:?}, {shape:?}",
+        dims(theta)
+    );
+    let y = decoders::forward(&values(x), shape, &values(theta), prec);
+    tensor(y, vec![xd[0], shape.total_outputs()])
+}
+
 impl PonqCpuOps for Flex {
+    fn decoders_cl(
+        x: FlexTensor,
+        theta: FlexTensor,
+        shape: DecoderShape,
+        bf16: bool,
+    ) -> FlexTensor {
+        decoders_forward(&x, &theta, &shape, precision(bf16))
+    }
+
     fn conv3d_cl(
         x: FlexTensor,
         w: FlexTensor,
@@ -320,6 +355,32 @@ impl Backward<Flex, 4> for LinearResidualBackward {
     }
 }
 
+/// Backward of [`PonqCpuOps::decoders_cl`]; parents `[x, theta]`.
+#[derive(Debug)]
+struct DecodersBackward;
+
+impl Backward<Flex, 2> for DecodersBackward {
+    /// `(x, theta, shape, precision)`.
+    type State = (FlexTensor, FlexTensor, DecoderShape, Precision);
+
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_theta] = ops.parents;
+        let gy = grads.consume::<Flex>(&ops.node);
+        let (x, theta, shape, prec) = ops.state;
+        let g = decoders::backward(
+            &values(&x),
+            &shape,
+            &values(&theta),
+            &values(&gy),
+            node_x.is_some(),
+            node_theta.is_some(),
+            prec,
+        );
+        register(grads, node_x.map(|n| n.id), g.x, dims(&x));
+        register(grads, node_theta.map(|n| n.id), g.theta, dims(&theta));
+    }
+}
+
 fn register(
     grads: &mut Gradients,
     id: Option<burn::backend::autodiff::NodeId>,
@@ -332,6 +393,32 @@ fn register(
 }
 
 impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
+    fn decoders_cl(
+        x: FloatTensor<Self>,
+        theta: FloatTensor<Self>,
+        shape: DecoderShape,
+        bf16: bool,
+    ) -> FloatTensor<Self> {
+        let prec = precision(bf16);
+        match DecodersBackward
+            .prepare::<C>([x.node(), theta.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, tp) = (x.primitive().clone(), theta.primitive().clone());
+                let y = decoders_forward(&xp, &tp, &shape, prec);
+                prep.finish((xp, tp, shape, prec), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(decoders_forward(
+                x.primitive(),
+                theta.primitive(),
+                &shape,
+                prec,
+            )),
+        }
+    }
+
     fn conv3d_cl(
         x: FloatTensor<Self>,
         w: FloatTensor<Self>,
@@ -491,4 +578,29 @@ pub fn linear(
             bf16,
         ),
     })
+}
+
+/// The five decoders fused ([`decoders`]) on feature rows `[rows, W]` with the flat
+/// parameters `theta` (layout in [`DecoderShape`]): `[rows, T]`; GEMMs in `prec`.
+pub fn decoders(x: Tensor<2>, theta: Tensor<1>, shape: DecoderShape, prec: Precision) -> Tensor<2> {
+    Tensor::from_dispatch(<Dispatch as PonqCpuOps>::decoders_cl(
+        x.into_dispatch(),
+        theta.into_dispatch(),
+        shape,
+        prec == Precision::Bf16,
+    ))
+}
+
+/// `theta` for [`decoders`]: the decoders' parameters flattened in [`DecoderShape`]'s order
+/// (the concatenation carries the gradient back to each layer's parameters).
+pub fn decoder_params(layers: &[&Conv3d]) -> Tensor<1> {
+    let parts: Vec<Tensor<1>> = layers
+        .iter()
+        .flat_map(|c| {
+            let (w, b) = params(c);
+            let n: usize = w.dims().iter().product();
+            [w.reshape([n]), b]
+        })
+        .collect();
+    Tensor::cat(parts, 0)
 }

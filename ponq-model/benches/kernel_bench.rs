@@ -1,6 +1,7 @@
 //! GFLOP/s of each fast CPU kernel on the layer shapes of the paper's network (32^3 cells,
 //! width 128) and of `configs/cpu.toml`'s (8 crops of 16^3 cells, width 32).
-//! `cargo bench -p ponq-model --bench kernel_bench`; `train_bench` (ponq-train) gives the
+//! The five decoders fused ([`ponq_model::fast::decoders`]) against their layers one at a
+//! time. `cargo bench -p ponq-model --bench kernel_bench`; `train_bench` (ponq-train) gives the
 //! whole network and the GEMM ceiling.
 
 use std::time::Instant;
@@ -148,6 +149,71 @@ fn main() {
                 "| 1x1x1 | {name} | {p}backward (dZ, dX, dW, db), fused | {:.2} | {:.0} |",
                 t * 1e3,
                 2.0 * lf / t / 1e9
+            );
+            // The five decoders (3 blocks, P = 4 heads) fused per row tile, against their 35
+            // layers one at a time (forward).
+            let ds = ponq_model::fast::decoders::DecoderShape {
+                width: c,
+                blocks: 3,
+                outputs: [12, 12, 24, 12, 1],
+            };
+            let theta: Vec<f32> = values(ds.params(), 11).iter().map(|v| v * 0.05).collect();
+            let df = 2.0 * (rows * (ds.params() - 3 * 5 * 2 * c - 61)) as f64;
+            let t = best(
+                || {
+                    let mut outs = Vec::new();
+                    for d in 0..5 {
+                        let mut h = xl.to_vec();
+                        for _ in 0..3 {
+                            let a = linear_forward(&h, c, &wl, &b, None, Act::Leaky(0.01), prec);
+                            h = linear_forward(&a, c, &wl, &b, Some(&h), Act::Leaky(0.01), prec);
+                        }
+                        let o = ds.outputs[d];
+                        outs.push(linear_forward(
+                            &h,
+                            c,
+                            &wl[..o * c],
+                            &b[..o],
+                            None,
+                            Act::Identity,
+                            prec,
+                        ));
+                    }
+                    std::hint::black_box(outs);
+                },
+                3,
+            );
+            println!(
+                "| five decoders | {name} | {p}forward, 35 layers one by one | {:.2} | {:.0} |",
+                t * 1e3,
+                df / t / 1e9
+            );
+            let t = best(
+                || {
+                    drop(std::hint::black_box(ponq_model::fast::decoders::forward(
+                        xl, &ds, &theta, prec,
+                    )))
+                },
+                3,
+            );
+            println!(
+                "| five decoders | {name} | {p}forward, fused | {:.2} | {:.0} |",
+                t * 1e3,
+                df / t / 1e9
+            );
+            let gout = values(rows * ds.total_outputs(), 13);
+            let t = best(
+                || {
+                    drop(std::hint::black_box(ponq_model::fast::decoders::backward(
+                        xl, &ds, &theta, &gout, true, true, prec,
+                    )))
+                },
+                3,
+            );
+            println!(
+                "| five decoders | {name} | {p}backward, fused (recomputes the forward) | {:.2} | {:.0} |",
+                t * 1e3,
+                3.0 * df / t / 1e9
             );
         }
     }

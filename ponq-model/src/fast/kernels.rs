@@ -670,11 +670,24 @@ impl ConvShape {
 
 /// Fills `col` (`[m, k^3 cin]`) with the im2col rows of output rows `r0 .. r0 + m`.
 fn im2col(x: &[f32], s: &ConvShape, r0: usize, m: usize, col: &mut [f32]) {
+    im2col_planes(x, s, r0, m, 0..s.k, col);
+}
+
+/// The columns of the kernel planes `planes` (first kernel axis) of [`im2col`]: `col` is `[m,
+/// planes.len() k^2 cin]`, the columns `planes.start k^2 cin ..` of the full im2col rows.
+fn im2col_planes(
+    x: &[f32],
+    s: &ConvShape,
+    r0: usize,
+    m: usize,
+    planes: std::ops::Range<usize>,
+    col: &mut [f32],
+) {
     let [o1, o2, o3] = s.out_dims();
     let [d1, d2, d3] = s.dims;
     let (k, cin) = (s.k, s.cin);
     let pad = s.pad as isize;
-    let kd = s.kdim();
+    let kd = planes.len() * k * k * cin;
     for r in 0..m {
         let row = r0 + r;
         let l = row % o3;
@@ -682,11 +695,11 @@ fn im2col(x: &[f32], s: &ConvShape, r0: usize, m: usize, col: &mut [f32]) {
         let i = (row / (o3 * o2)) % o1;
         let b = row / (o1 * o2 * o3);
         let dst = &mut col[r * kd..(r + 1) * kd];
-        for a in 0..k {
+        for (pa, a) in planes.clone().enumerate() {
             let ii = i as isize + a as isize - pad;
             for c in 0..k {
                 let jj = j as isize + c as isize - pad;
-                let seg = &mut dst[(a * k + c) * k * cin..(a * k + c + 1) * k * cin];
+                let seg = &mut dst[(pa * k + c) * k * cin..(pa * k + c + 1) * k * cin];
                 if ii < 0 || ii >= d1 as isize || jj < 0 || jj >= d2 as isize {
                     seg.fill(0.0);
                     continue;
@@ -784,54 +797,59 @@ pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32], prec: Precision) -
     assert_eq!(x.len(), s.in_rows() * s.cin);
     let tile = tile_rows(kd);
     let transposed = prec.for_reduction(tile_rows(kd)) == Precision::Bf16;
+    // One kernel plane (k^2 offsets) at a time over all tiles of a part: that plane's slice of
+    // the accumulator and of the im2col block stay in L2 from one tile to the next.
+    let pd = kd / s.k;
     let partials: Vec<Vec<f32>> = parts(rows, tile)
         .into_par_iter()
         .map(|(a, b)| {
             let mut acc = vec![0.0f32; kd * cout];
-            let mut col = vec![0.0f32; tile * kd];
-            let mut first = true;
-            for r0 in (a..b).step_by(tile) {
-                let m = tile.min(b - r0);
-                im2col(x, s, r0, m, &mut col);
-                let gzt = &gz[r0 * cout..(r0 + m) * cout];
-                if transposed {
-                    // SAFETY: dZ^T is [cout, m] (row stride 1, column stride cout), col
-                    // [m, kd], acc [cout, kd].
-                    unsafe {
-                        mm(
-                            cout,
-                            kd,
-                            m,
-                            &mut acc,
-                            kd,
-                            !first,
-                            gzt,
-                            (1, cout),
-                            &col,
-                            (kd, 1),
-                            prec,
-                        )
-                    };
-                } else {
-                    // SAFETY: col^T is [kd, m] (row stride 1, column stride kd), dZ tile
-                    // [m, cout], acc [kd, cout].
-                    unsafe {
-                        mm(
-                            kd,
-                            cout,
-                            m,
-                            &mut acc,
-                            cout,
-                            !first,
-                            &col,
-                            (1, kd),
-                            gzt,
-                            (cout, 1),
-                            prec,
-                        )
-                    };
+            let mut col = vec![0.0f32; tile * pd];
+            for plane in 0..s.k {
+                let mut first = true;
+                for r0 in (a..b).step_by(tile) {
+                    let m = tile.min(b - r0);
+                    im2col_planes(x, s, r0, m, plane..plane + 1, &mut col);
+                    let gzt = &gz[r0 * cout..(r0 + m) * cout];
+                    if transposed {
+                        // SAFETY: dZ^T is [cout, m] (row stride 1, column stride cout), col
+                        // [m, pd], the plane's columns of acc [cout, kd] (row stride kd).
+                        unsafe {
+                            mm(
+                                cout,
+                                pd,
+                                m,
+                                &mut acc[plane * pd..],
+                                kd,
+                                !first,
+                                gzt,
+                                (1, cout),
+                                &col,
+                                (pd, 1),
+                                prec,
+                            )
+                        };
+                    } else {
+                        // SAFETY: col^T is [pd, m] (row stride 1, column stride pd), dZ tile
+                        // [m, cout], the plane's rows of acc [kd, cout].
+                        unsafe {
+                            mm(
+                                pd,
+                                cout,
+                                m,
+                                &mut acc[plane * pd * cout..(plane + 1) * pd * cout],
+                                cout,
+                                !first,
+                                &col,
+                                (1, pd),
+                                gzt,
+                                (cout, 1),
+                                prec,
+                            )
+                        };
+                    }
+                    first = false;
                 }
-                first = false;
             }
             acc
         })

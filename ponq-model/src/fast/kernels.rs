@@ -201,6 +201,11 @@ impl<'a> Weights<'a> {
     /// `dst[m, n] = lhs[m, k] B` for `lhs` with row stride `lhs_rs` (column stride 1) and
     /// `dst` `[m, n]`; on this thread.
     pub(super) fn mul(&self, lhs: &[f32], lhs_rs: usize, dst: &mut [f32]) {
+        self.mul_acc(lhs, lhs_rs, dst, false);
+    }
+
+    /// [`Weights::mul`], adding to `dst` when `accumulate`.
+    pub(super) fn mul_acc(&self, lhs: &[f32], lhs_rs: usize, dst: &mut [f32], accumulate: bool) {
         let (k, n) = (self.k, self.n);
         assert!(n > 0 && dst.len().is_multiple_of(n));
         let m = dst.len() / n;
@@ -210,7 +215,9 @@ impl<'a> Weights<'a> {
         assert!(lhs_rs >= k && lhs.len() >= (m - 1) * lhs_rs + k);
         match &self.bf16 {
             // SAFETY: lhs is [m, k] at row stride lhs_rs, dst [m, n]: in bounds (asserted).
-            Some(pb) => unsafe { super::bf16::gemm_packed(m, dst, n, false, lhs, (lhs_rs, 1), pb) },
+            Some(pb) => unsafe {
+                super::bf16::gemm_packed(m, dst, n, accumulate, lhs, (lhs_rs, 1), pb)
+            },
             // SAFETY: as above; B is [k, n] (asserted in `new`).
             None => unsafe {
                 mm(
@@ -219,7 +226,7 @@ impl<'a> Weights<'a> {
                     k,
                     dst,
                     n,
-                    false,
+                    accumulate,
                     lhs,
                     (lhs_rs, 1),
                     self.b,
@@ -230,6 +237,10 @@ impl<'a> Weights<'a> {
         }
     }
 }
+
+/// Tiles per group in [`conv_forward`] (each kernel plane's weights serve the group's tiles
+/// in turn).
+const CONV_GROUP_TILES: usize = 8;
 
 /// Rows per tile: 128 to 256, the im2col block at most about 1 MB (this CPU's L2 is 2 MB
 /// per core); measured best for widths 32 and 128 (`benches/kernel_bench.rs`).
@@ -771,15 +782,28 @@ pub fn conv_forward(
     let tile = tile_rows(kd);
     let zero = vec![0.0f32; cout];
     let bias = bias.unwrap_or(&zero);
-    let weights = Weights::new(packed, kd, cout, prec);
-    y.par_chunks_mut(tile * cout).enumerate().for_each_init(
-        || vec![0.0f32; tile * kd],
-        |col, (t, yt)| {
-            let m = yt.len() / cout;
-            im2col(x, s, t * tile, m, col);
-            weights.mul(col, kd, yt);
+    // One kernel plane (k^2 offsets, `pd` rows of the packed weights) at a time over a group
+    // of tiles: the plane's weights stay in L2 across the group's tiles, and each tile's
+    // im2col block is a third of the full one.
+    let pd = kd / s.k;
+    let planes: Vec<Weights> = (0..s.k)
+        .map(|p| Weights::new(&packed[p * pd * cout..(p + 1) * pd * cout], pd, cout, prec))
+        .collect();
+    let group = tile * CONV_GROUP_TILES;
+    y.par_chunks_mut(group * cout).enumerate().for_each_init(
+        || vec![0.0f32; tile * pd],
+        |col, (g, yg)| {
+            let rows_g = yg.len() / cout;
+            for (p, wp) in planes.iter().enumerate() {
+                for (t, yt) in yg.chunks_mut(tile * cout).enumerate() {
+                    let m = yt.len() / cout;
+                    im2col_planes(x, s, g * group + t * tile, m, p..p + 1, col);
+                    wp.mul_acc(&col[..m * pd], pd, yt, p > 0);
+                }
+            }
+            debug_assert_eq!(rows_g * cout, yg.len());
             if bias.iter().any(|&b| b != 0.0) || act != Act::Identity {
-                epilogue(yt, cout, bias, None, act);
+                epilogue(yg, cout, bias, None, act);
             }
         },
     );
@@ -1177,7 +1201,8 @@ pub(super) mod tests {
         };
         let (f, b) = (Precision::F32, Precision::Bf16);
         // Rows a multiple of the tile (every weight-gradient call reduces over a whole tile).
-        for (cin, cout) in [(8, 20), (16, 48)] {
+        // Each kernel plane's GEMM reduces over k^2 cin values (9 cin >= 96 here).
+        for (cin, cout) in [(11, 20), (16, 48)] {
             let s = ConvShape {
                 batch: 2,
                 dims: [8, 8, 8],
@@ -1186,7 +1211,7 @@ pub(super) mod tests {
                 k: 3,
                 pad: 1,
             };
-            assert!(s.kdim() >= BF16_MIN_K && 27 * cout >= BF16_MIN_K);
+            assert!(9 * cin >= BF16_MIN_K && 9 * cout >= BF16_MIN_K);
             let x = lcg(31, s.in_rows() * cin);
             let w = lcg(32, cout * cin * 27);
             let g = lcg(33, s.out_rows() * cout);

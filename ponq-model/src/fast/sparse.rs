@@ -5,7 +5,7 @@
 //! only: the `L` padded 3x3x3 layers reach `L` cells on each side, the unpadded 2x2x2 input
 //! layer the cell's own eight nodes. So the encoder needs layer `l`'s output only on the
 //! needed cells dilated `L - l` times ([`ActiveSets`]), and each layer here computes exactly
-//! those rows: an im2col GEMM (the same packed weights, row layout and `gemm` call as
+//! those rows: an im2col GEMM (the same packed weights, row layout and per-plane GEMMs as
 //! [`super::kernels::conv_forward`]) whose im2col rows gather the neighbours' feature rows
 //! through a cell -> row index, and put zeros where the dense layer reads its zero padding.
 //!
@@ -113,10 +113,14 @@ fn coords(c: usize, dims: [usize; 3]) -> [usize; 3] {
 }
 
 /// `act(im2col GEMM + bias)` at the `m = dst.len()` rows whose im2col rows `fill` writes
-/// (`fill(cell, row)` with `row.len() == kd`), weights `packed: [kd, cout]`.
+/// (`fill(cell, row)` with `row.len() == kd`), weights `packed: [kd, cout]`, summed one
+/// kernel plane (`kd / planes` columns) at a time as the dense layers do
+/// ([`super::kernels::conv_forward`]), so that both take the same precision per GEMM.
+#[allow(clippy::too_many_arguments)]
 fn gather_gemm(
     dst: &[u32],
     kd: usize,
+    planes: usize,
     packed: &[f32],
     bias: &[f32],
     act: Act,
@@ -130,7 +134,10 @@ fn gather_gemm(
         return y;
     }
     let tile = tile_rows(kd);
-    let weights = Weights::new(packed, kd, cout, prec);
+    let pd = kd / planes;
+    let weights: Vec<Weights> = (0..planes)
+        .map(|p| Weights::new(&packed[p * pd * cout..(p + 1) * pd * cout], pd, cout, prec))
+        .collect();
     y.par_chunks_mut(tile * cout).enumerate().for_each_init(
         || vec![0.0f32; tile * kd],
         |col, (t, yt)| {
@@ -138,7 +145,9 @@ fn gather_gemm(
             for (r, &c) in dst[t * tile..t * tile + m].iter().enumerate() {
                 fill(c as usize, &mut col[r * kd..(r + 1) * kd]);
             }
-            weights.mul(col, kd, yt);
+            for (p, wp) in weights.iter().enumerate() {
+                wp.mul_acc(&col[p * pd..m * kd], kd, yt, p > 0);
+            }
             epilogue(yt, cout, bias, None, act);
         },
     );
@@ -164,7 +173,7 @@ pub fn encode(
     assert_eq!(layers.len(), sets.levels.len());
     // The input layer: the eight nodes of each cell, in the kernel's (a, b, c) order.
     let (w0, b0) = &layers[0];
-    let mut x = gather_gemm(&sets.levels[0], 8, w0, b0, act, prec, |cell, row| {
+    let mut x = gather_gemm(&sets.levels[0], 8, 2, w0, b0, act, prec, |cell, row| {
         let [i, j, k] = coords(cell, dims);
         for a in 0..2 {
             for b in 0..2 {
@@ -179,7 +188,7 @@ pub fn encode(
         let src = sets.index(l - 1);
         let input = &x;
         let kd = 27 * cin;
-        let y = gather_gemm(&sets.levels[l], kd, w, b, act, prec, |cell, row| {
+        let y = gather_gemm(&sets.levels[l], kd, 3, w, b, act, prec, |cell, row| {
             let [i, j, k] = coords(cell, dims);
             for a in 0..3 {
                 for bb in 0..3 {

@@ -679,13 +679,9 @@ impl ConvShape {
     }
 }
 
-/// Fills `col` (`[m, k^3 cin]`) with the im2col rows of output rows `r0 .. r0 + m`.
-fn im2col(x: &[f32], s: &ConvShape, r0: usize, m: usize, col: &mut [f32]) {
-    im2col_planes(x, s, r0, m, 0..s.k, col);
-}
-
-/// The columns of the kernel planes `planes` (first kernel axis) of [`im2col`]: `col` is `[m,
-/// planes.len() k^2 cin]`, the columns `planes.start k^2 cin ..` of the full im2col rows.
+/// The im2col rows of output rows `r0 .. r0 + m` (`[m, k^3 cin]`), restricted to the kernel
+/// planes `planes` (first kernel axis): `col` is `[m, planes.len() k^2 cin]`, the columns
+/// `planes.start k^2 cin ..` of the full rows.
 fn im2col_planes(
     x: &[f32],
     s: &ConvShape,

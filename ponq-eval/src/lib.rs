@@ -2,9 +2,9 @@
 //!
 //! Evaluation of PoNQ-rs with the paper's protocol (SPEC section 8), by module:
 //!
-//! - [`inputs`]: the shapes of a data folder (meshes, `ponq-prep` records, the authors' HDF5
+//! - [`mod@inputs`]: the shapes of a data folder (meshes, `ponq-prep` records, the authors' HDF5
 //!   files), restricted to a split, and their ground truth and SDF grids;
-//! - [`evaluate`]: one shape at one resolution reconstructed by PoNQ / PoNQ-lite
+//! - [`mod@evaluate`]: one shape at one resolution reconstructed by PoNQ / PoNQ-lite
 //!   (`ponq_infer`) and marching cubes on the same grid, scored with `ponq_mesh::metrics`
 //!   (CD, F1, NC, ECD, EF1, validity, #V, #F, time);
 //! - [`report`]: the rows of a run, resumable on disk, and the report (`per_shape.csv`,

@@ -43,7 +43,7 @@ pub struct Solid {
 }
 
 /// The smooth surface piece a boundary sample lies on: surface part `part` of primitive
-/// `prim` (and, for a slot's round ends, which end), see [`Primitive::patch`].
+/// `prim` (and, for a slot's round ends, which end), see `Primitive::patch`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Patch {
     /// Primitive index in the solid.

@@ -648,7 +648,7 @@ pub(crate) fn design(rng: &mut ChaCha8Rng, max_primitives: usize) -> Solid {
 /// Families of generated shapes (see [`super::SynthMix`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Family {
-    /// CSG parts of sharp-edged primitives ([`design`]).
+    /// CSG parts of sharp-edged primitives (`design`).
     Csg,
     /// The same features on a base whose edges are rounded by fillets (a rounded box or a
     /// rounded cylinder), with rounded bosses.

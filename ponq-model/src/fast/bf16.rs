@@ -310,7 +310,7 @@ impl PackedB {
     }
 }
 
-/// [`gemm`] with a right-hand side packed by [`PackedB::new`]: `dst[m, n] (+)= lhs[m, k] B`.
+/// [`gemm()`] with a right-hand side packed by [`PackedB::new`]: `dst[m, n] (+)= lhs[m, k] B`.
 ///
 /// # Safety
 /// The strided extents of `lhs` and `dst` must lie inside the slices (checked).

@@ -16,7 +16,7 @@
 //! The parameters are one flat vector `theta` ([`DecoderShape`] gives its layout), so that the
 //! Burn operation has two inputs; its gradient lands on the layers' parameters through the
 //! concatenation that builds it. Reductions over rows are summed per fixed part of the rows,
-//! the parts in order ([`super::kernels::PARTS`]): results do not depend on the thread count.
+//! the parts in order (eight parts, as in `kernels`): results do not depend on the thread count.
 
 use rayon::prelude::*;
 

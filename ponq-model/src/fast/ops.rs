@@ -63,7 +63,7 @@ pub trait PonqCpuOps: burn::backend::Backend {
         bf16: bool,
     ) -> FloatTensor<Self>;
 
-    /// The five decoders fused ([`decoders`]): `x: [rows, W]`, `theta: [shape.params()]` ->
+    /// The five decoders fused ([`mod@decoders`]): `x: [rows, W]`, `theta: [shape.params()]` ->
     /// `[rows, shape.total_outputs()]`.
     fn decoders_cl(
         x: FloatTensor<Self>,
@@ -580,7 +580,7 @@ pub fn linear(
     })
 }
 
-/// The five decoders fused ([`decoders`]) on feature rows `[rows, W]` with the flat
+/// The five decoders fused ([`mod@decoders`]) on feature rows `[rows, W]` with the flat
 /// parameters `theta` (layout in [`DecoderShape`]): `[rows, T]`; GEMMs in `prec`.
 pub fn decoders(x: Tensor<2>, theta: Tensor<1>, shape: DecoderShape, prec: Precision) -> Tensor<2> {
     Tensor::from_dispatch(<Dispatch as PonqCpuOps>::decoders_cl(
@@ -591,7 +591,7 @@ pub fn decoders(x: Tensor<2>, theta: Tensor<1>, shape: DecoderShape, prec: Preci
     ))
 }
 
-/// `theta` for [`decoders`]: the decoders' parameters flattened in [`DecoderShape`]'s order
+/// `theta` for [`decoders()`]: the decoders' parameters flattened in [`DecoderShape`]'s order
 /// (the concatenation carries the gradient back to each layer's parameters).
 pub fn decoder_params(layers: &[&Conv3d]) -> Tensor<1> {
     let parts: Vec<Tensor<1>> = layers

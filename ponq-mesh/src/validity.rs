@@ -4,9 +4,10 @@
 //! the same without the (more expensive) geometric self-intersection test.
 //!
 //! Every geometric decision is exact: degenerate faces and self-intersections are decided with
-//! Shewchuk's adaptive predicates (`robust::orient3d`, and `robust::orient2d` on an axis
-//! projection that is injective on the relevant plane or line) evaluated on the `f64`
-//! coordinates, with no epsilon. A mesh that passes [`ValidityReport::is_valid`] is therefore a
+//! exact orientation tests ([`crate::predicates::orient3d`]: a semi-static filter, then
+//! Shewchuk's adaptive predicate, and `robust::orient2d` on an axis projection that is
+//! injective on the relevant plane or line) evaluated on the `f64` coordinates, with no
+//! epsilon. A mesh that passes [`ValidityReport::is_valid`] is therefore a
 //! closed, consistently oriented 2-manifold whose faces meet exactly along their shared
 //! edges and vertices (its triangles, taken as closed sets, touch nowhere else).
 //!
@@ -26,7 +27,7 @@
 use std::fmt;
 
 use rayon::prelude::*;
-use robust::{Coord, Coord3D, orient2d, orient3d};
+use robust::{Coord, orient2d};
 
 use crate::bvh::{Aabb, Bvh};
 use crate::trimesh::TriMesh;
@@ -538,19 +539,12 @@ fn pair_rule(
 // the nearer of their far endpoints (a vertex among a, b, c, d) lies in both triangles. Hence
 // K ≠ {v} iff ab meets T2 or cd meets T1 (neither edge contains v).
 
-#[inline]
-fn c3(p: &[f64; 3]) -> Coord3D<f64> {
-    Coord3D {
-        x: p[0],
-        y: p[1],
-        z: p[2],
-    }
-}
-
-/// Exact sign of `orient3d(a, b, c, d)`.
+/// Exact sign of `robust::orient3d(a, b, c, d)` (`det[a-d, b-d, c-d]`), through
+/// [`crate::predicates::orient3d`] (its semi-static filter decides most calls inline; the
+/// rest go to the same adaptive predicate), whose convention is the opposite sign.
 #[inline]
 fn o3(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i8 {
-    sign(orient3d(c3(a), c3(b), c3(c), c3(d)))
+    -(crate::predicates::orient3d(a, b, c, d) as i8)
 }
 
 /// Exact sign of `orient2d(a, b, c)`.

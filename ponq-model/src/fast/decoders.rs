@@ -400,6 +400,46 @@ fn add_column_sums(acc: &mut [f64], g: &[f32], m: usize, n: usize, rs: usize) {
     }
 }
 
+/// Adds one tile's weight and bias gradients of layer `l` (`W [cout, W]`): `dW += dZ^T X`,
+/// `db += sums(dZ)`, for `dZ [m, cout]` at row stride `dz_rs` and the layer's input `X [m,
+/// W]` at row stride `x_rs`. `gw` is in `theta`'s layout, `gb` in [`Layer::bi`]'s.
+#[allow(clippy::too_many_arguments)]
+fn add_layer_grads(
+    gw: &mut [f32],
+    gb: &mut [f64],
+    l: Layer,
+    w: usize,
+    m: usize,
+    dz: (&[f32], usize),
+    x: (&[f32], usize),
+    prec: Precision,
+) {
+    let ((dz, dz_rs), (x, x_rs)) = (dz, x);
+    // SAFETY: dZ^T is [cout, m] (row stride 1, column stride dz_rs), X [m, W] at row stride
+    // x_rs, dst the layer's [cout, W] weight slot; the callers pass tiles of m rows.
+    unsafe {
+        mm(
+            l.cout,
+            w,
+            m,
+            &mut gw[l.w..l.w + l.cout * w],
+            w,
+            true,
+            dz,
+            (1, dz_rs),
+            x,
+            (x_rs, 1),
+            prec,
+        )
+    };
+    add_column_sums(&mut gb[l.bi..l.bi + l.cout], dz, m, l.cout, dz_rs);
+}
+
+/// `dst += src`, element by element.
+fn add_into(dst: &mut [f32], src: &[f32]) {
+    dst.iter_mut().zip(src).for_each(|(d, v)| *d += v);
+}
+
 /// Gradients of [`forward`] from the output's gradient `gout [rows, T]`: the features' (when
 /// `need_x`) and `theta`'s (when `need_theta`). Each tile's activations are recomputed from
 /// `x` (nothing of the forward pass is kept).
@@ -475,24 +515,8 @@ pub fn backward(
                     let (off, od) = (s.output_offset(d), lh.cout);
                     let h = plan.head_input(xt, m, &scr);
                     if need_theta && od > 0 {
-                        // SAFETY: go^T is [od, m] (row stride 1, column stride T, from
-                        // column off of the [m, T] tile), h is [m, W]; dst [od, W].
-                        unsafe {
-                            mm(
-                                od,
-                                w,
-                                m,
-                                &mut gw[lh.w..lh.w + od * w],
-                                w,
-                                true,
-                                &gt[off..],
-                                (1, t),
-                                h,
-                                (w, 1),
-                                prec,
-                            )
-                        };
-                        add_column_sums(&mut gb[lh.bi..lh.bi + od], &gt[off..], m, od, t);
+                        // go: the head's columns of the [m, T] tile.
+                        add_layer_grads(&mut gw, &mut gb, lh, w, m, (&gt[off..], t), (h, w), prec);
                     }
                     let gh_dst: &mut [f32] = if blocks == 0 {
                         // The head reads the features: its dX goes straight to the residual
@@ -519,10 +543,7 @@ pub fn backward(
                         )
                     };
                     if blocks == 0 {
-                        gres[..m * w]
-                            .iter_mut()
-                            .zip(&dz2[..m * w])
-                            .for_each(|(g, v)| *g += v);
+                        add_into(&mut gres[..m * w], &dz2[..m * w]);
                     }
                     for bk in (0..blocks).rev() {
                         // Block output: h' = act(a W2^T + b2 + h).
@@ -544,24 +565,16 @@ pub fn backward(
                             (&scr.acts[2 * bk], w)
                         };
                         if need_theta {
-                            // SAFETY: dZ2^T [W, m] (strides 1, W), a [m, W] at row stride
-                            // a_rs; dst [W, W].
-                            unsafe {
-                                mm(
-                                    w,
-                                    w,
-                                    m,
-                                    &mut gw[l2.w..l2.w + w * w],
-                                    w,
-                                    true,
-                                    &dz2,
-                                    (1, w),
-                                    a_in,
-                                    (a_rs, 1),
-                                    prec,
-                                )
-                            };
-                            add_column_sums(&mut gb[l2.bi..l2.bi + w], &dz2, m, w, w);
+                            add_layer_grads(
+                                &mut gw,
+                                &mut gb,
+                                l2,
+                                w,
+                                m,
+                                (&dz2, w),
+                                (a_in, a_rs),
+                                prec,
+                            );
                         }
                         bwd[d][2 * bk + 1]
                             .as_ref()
@@ -580,32 +593,22 @@ pub fn backward(
                                 &mut dz1_all[d * w..],
                                 nz,
                             );
-                            gres[..m * w]
-                                .iter_mut()
-                                .zip(&dz2[..m * w])
-                                .for_each(|(g, v)| *g += v);
+                            add_into(&mut gres[..m * w], &dz2[..m * w]);
                         } else {
                             let l1 = s.layer(d, 2 * bk);
                             act_grad(m, w, &ga, w, a_in, a_rs, plan.act, &mut dz1, w);
                             let h_in = &scr.acts[2 * bk - 1][..m * w];
                             if need_theta {
-                                // SAFETY: dZ1^T [W, m], h [m, W]; dst [W, W].
-                                unsafe {
-                                    mm(
-                                        w,
-                                        w,
-                                        m,
-                                        &mut gw[l1.w..l1.w + w * w],
-                                        w,
-                                        true,
-                                        &dz1,
-                                        (1, w),
-                                        h_in,
-                                        (w, 1),
-                                        prec,
-                                    )
-                                };
-                                add_column_sums(&mut gb[l1.bi..l1.bi + w], &dz1, m, w, w);
+                                add_layer_grads(
+                                    &mut gw,
+                                    &mut gb,
+                                    l1,
+                                    w,
+                                    m,
+                                    (&dz1, w),
+                                    (h_in, w),
+                                    prec,
+                                );
                             }
                             // dh = dZ1 W1 + dZ2 (the residual).
                             bwd[d][2 * bk].as_ref().expect("block layer weights").mul(
@@ -613,10 +616,7 @@ pub fn backward(
                                 w,
                                 &mut gh[..m * w],
                             );
-                            gh[..m * w]
-                                .iter_mut()
-                                .zip(&dz2[..m * w])
-                                .for_each(|(g, v)| *g += v);
+                            add_into(&mut gh[..m * w], &dz2[..m * w]);
                         }
                     }
                 }
@@ -651,9 +651,7 @@ pub fn backward(
                         None => dst.fill(0.0),
                     }
                     if blocks > 0 || gx_heads {
-                        dst.iter_mut()
-                            .zip(&gres[..m * w])
-                            .for_each(|(g, v)| *g += v);
+                        add_into(dst, &gres[..m * w]);
                     }
                 }
             }

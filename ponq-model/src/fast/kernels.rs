@@ -32,7 +32,7 @@ pub enum Act {
 
 impl Act {
     #[inline]
-    pub(super) fn apply(self, z: f32) -> f32 {
+    fn apply(self, z: f32) -> f32 {
         match self {
             Act::Identity => z,
             Act::Leaky(s) => {
@@ -285,7 +285,7 @@ pub fn activation_grad(y: &[f32], gy: &[f32], act: Act) -> Vec<f32> {
 /// Reductions over rows are split into this many parts, whatever the thread count, and the
 /// parts are summed in order: results are the same on every machine and thread count (exact
 /// resume of a training run depends on it).
-pub(super) const PARTS: usize = 8;
+const PARTS: usize = 8;
 
 /// Row ranges of the [`PARTS`] parts of `rows` rows (in units of `unit` rows).
 pub(super) fn parts(rows: usize, unit: usize) -> Vec<(usize, usize)> {
@@ -789,7 +789,6 @@ pub fn conv_forward(
     y.par_chunks_mut(group * cout).enumerate().for_each_init(
         || vec![0.0f32; tile * pd],
         |col, (g, yg)| {
-            let rows_g = yg.len() / cout;
             for (p, wp) in planes.iter().enumerate() {
                 for (t, yt) in yg.chunks_mut(tile * cout).enumerate() {
                     let m = yt.len() / cout;
@@ -797,7 +796,6 @@ pub fn conv_forward(
                     wp.mul_acc(&col[..m * pd], pd, yt, p > 0);
                 }
             }
-            debug_assert_eq!(rows_g * cout, yg.len());
             if bias.iter().any(|&b| b != 0.0) || act != Act::Identity {
                 epilogue(yg, cout, bias, None, act);
             }

@@ -2,8 +2,9 @@
 //! for the layers that cost the time, on channels-last activations from the encoder's first
 //! layer to the decoder heads (no layout conversion per layer).
 //!
-//! - [`kernels`]: the kernels on slices (im2col GEMM convolutions and 1x1x1 GEMMs with
-//!   bias, LeakyReLU and the residual add fused; their backward passes), f32 or bf16 GEMMs;
+//! - [`kernels`]: the kernels on slices (im2col GEMM convolutions and their backward passes;
+//!   1x1x1 layers one at a time, the baseline `kernel_bench` times the fused decoders
+//!   against), f32 or bf16 GEMMs;
 //! - [`decoders`]: the five decoders fused per row tile of the shared features (their first
 //!   layers as one GEMM; the backward pass recomputes a tile's activations in cache);
 //! - [`bf16`]: the bf16 GEMM with f32 sums (AMX or AVX-512 BF16, runtime detected);

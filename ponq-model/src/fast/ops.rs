@@ -1,7 +1,7 @@
 //! The fast CPU kernels as Burn operations: a backend extension ([`PonqCpuOps`]) implemented
 //! for the `flex` CPU backend (forward only) and for `Autodiff<Flex>` (forward, and a
 //! hand-written backward registered in the autodiff graph), plus the `Tensor` wrappers the
-//! network calls ([`conv3d`], [`linear`]).
+//! network calls ([`conv3d`], [`decoders()`]).
 //!
 //! The tensors are channels-last: a grid batch is `[B, D1, D2, D3, C]`, a row block
 //! `[rows, C]`. Weights and biases are the `Conv3d` parameters as they are (`[Cout, Cin, k, k,
@@ -21,11 +21,11 @@ use burn::prelude::*;
 use burn::tensor::DType;
 
 use super::decoders::{self, DecoderShape};
-use super::kernels::{self, Act, ConvShape, LinearGrads, Precision};
+use super::kernels::{self, Act, ConvShape, Precision};
 
 /// The fused layers of the PoNQ network on the CPU.
 ///
-/// `act` selects LeakyReLU with negative slope `slope` after the bias (and residual); without
+/// `act` selects LeakyReLU with negative slope `slope` after the bias; without
 /// it the layer is affine. `bf16` runs the GEMMs (forward and backward) with bf16 inputs and
 /// f32 sums ([`Precision::Bf16`]).
 #[backend_extension(Flex, Autodiff)]
@@ -37,27 +37,6 @@ pub trait PonqCpuOps: burn::backend::Backend {
         w: FloatTensor<Self>,
         b: FloatTensor<Self>,
         pad: usize,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FloatTensor<Self>;
-
-    /// `act(x w^T + b)`: `x: [rows, Cin]`, `w: [Cout, Cin, 1, 1, 1]`, `b: [Cout]`.
-    fn linear_cl(
-        x: FloatTensor<Self>,
-        w: FloatTensor<Self>,
-        b: FloatTensor<Self>,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FloatTensor<Self>;
-
-    /// `act(x w^T + b + r)` with a residual `r: [rows, Cout]`.
-    fn linear_residual_cl(
-        x: FloatTensor<Self>,
-        w: FloatTensor<Self>,
-        b: FloatTensor<Self>,
-        r: FloatTensor<Self>,
         act: bool,
         slope: f32,
         bf16: bool,
@@ -151,33 +130,6 @@ fn conv_forward(
     tensor(y, vec![s.batch, o[0], o[1], o[2], s.cout])
 }
 
-fn linear_forward(
-    x: &FlexTensor,
-    w: &FlexTensor,
-    b: &FlexTensor,
-    r: Option<&FlexTensor>,
-    act: Act,
-    prec: Precision,
-) -> FlexTensor {
-    let xd = dims(x);
-    let wd = dims(w);
-    assert!(
-        xd.len() == 2 && wd.len() == 5 && wd[1] == xd[1],
-        "linear_cl: x {xd:?}, w {wd:?}"
-    );
-    let rv = r.map(values);
-    let y = kernels::linear_forward(
-        &values(x),
-        xd[1],
-        &values(w),
-        &values(b),
-        rv.as_deref(),
-        act,
-        prec,
-    );
-    tensor(y, vec![xd[0], wd[0]])
-}
-
 fn decoders_forward(
     x: &FlexTensor,
     theta: &FlexTensor,
@@ -216,36 +168,6 @@ impl PonqCpuOps for Flex {
         let s = conv_shape(&x, &w, pad);
         conv_forward(&x, &w, &b, &s, activation(act, slope), precision(bf16))
     }
-
-    fn linear_cl(
-        x: FlexTensor,
-        w: FlexTensor,
-        b: FlexTensor,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FlexTensor {
-        linear_forward(&x, &w, &b, None, activation(act, slope), precision(bf16))
-    }
-
-    fn linear_residual_cl(
-        x: FlexTensor,
-        w: FlexTensor,
-        b: FlexTensor,
-        r: FlexTensor,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FlexTensor {
-        linear_forward(
-            &x,
-            &w,
-            &b,
-            Some(&r),
-            activation(act, slope),
-            precision(bf16),
-        )
-    }
 }
 
 /// Backward of [`PonqCpuOps::conv3d_cl`]; parents `[x, w, b]`.
@@ -282,76 +204,6 @@ impl Backward<Flex, 3> for ConvBackward {
             let gx = kernels::conv_input_grad(&s, &values(&w), &gz, prec);
             grads.register::<Flex>(node.id, tensor(gx, dims(&x)));
         }
-    }
-}
-
-/// Backward of [`PonqCpuOps::linear_cl`] (`N = 3`: `[x, w, b]`) and
-/// [`PonqCpuOps::linear_residual_cl`] (`N = 4`: `[x, w, b, r]`).
-#[derive(Debug)]
-struct LinearBackward;
-
-/// `(x, w, y, activation, precision)`.
-type LinearState = (FlexTensor, FlexTensor, FlexTensor, Act, Precision);
-
-fn linear_grads(state: LinearState, gy: FlexTensor, need: kernels::LinearNeeds) -> LinearGrads {
-    let (x, w, y, act, prec) = state;
-    let xd = dims(&x);
-    let wd = dims(&w);
-    kernels::linear_grads(
-        &values(&x),
-        xd[1],
-        &values(&w),
-        &values(&y),
-        &values(&gy),
-        act,
-        wd[0],
-        need,
-        prec,
-    )
-}
-
-impl Backward<Flex, 3> for LinearBackward {
-    type State = LinearState;
-
-    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let [node_x, node_w, node_b] = ops.parents;
-        let gy = grads.consume::<Flex>(&ops.node);
-        let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
-        let need = kernels::LinearNeeds {
-            x: node_x.is_some(),
-            w: node_w.is_some(),
-            b: node_b.is_some(),
-            z: false,
-        };
-        let g = linear_grads(ops.state, gy, need);
-        register(grads, node_x.map(|n| n.id), g.x, xd);
-        register(grads, node_w.map(|n| n.id), g.w, wd.clone());
-        register(grads, node_b.map(|n| n.id), g.b, vec![wd[0]]);
-    }
-}
-
-/// The residual op's backward: `LinearBackward` plus `dR = dZ`.
-#[derive(Debug)]
-struct LinearResidualBackward;
-
-impl Backward<Flex, 4> for LinearResidualBackward {
-    type State = LinearState;
-
-    fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let [node_x, node_w, node_b, node_r] = ops.parents;
-        let gy = grads.consume::<Flex>(&ops.node);
-        let (xd, wd) = (dims(&ops.state.0), dims(&ops.state.1));
-        let need = kernels::LinearNeeds {
-            x: node_x.is_some(),
-            w: node_w.is_some(),
-            b: node_b.is_some(),
-            z: node_r.is_some(),
-        };
-        let g = linear_grads(ops.state, gy, need);
-        register(grads, node_x.map(|n| n.id), g.x, xd.clone());
-        register(grads, node_w.map(|n| n.id), g.w, wd.clone());
-        register(grads, node_b.map(|n| n.id), g.b, vec![wd[0]]);
-        register(grads, node_r.map(|n| n.id), g.z, vec![xd[0], wd[0]]);
     }
 }
 
@@ -451,69 +303,6 @@ impl<C: CheckpointStrategy> PonqCpuOps for Autodiff<Flex, C> {
             )),
         }
     }
-
-    fn linear_cl(
-        x: FloatTensor<Self>,
-        w: FloatTensor<Self>,
-        b: FloatTensor<Self>,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FloatTensor<Self> {
-        let act = activation(act, slope);
-        let prec = precision(bf16);
-        match LinearBackward
-            .prepare::<C>([x.node(), w.node(), b.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
-                let y = linear_forward(&xp, &wp, b.primitive(), None, act, prec);
-                prep.finish((xp, wp, y.clone(), act, prec), y)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(linear_forward(
-                x.primitive(),
-                w.primitive(),
-                b.primitive(),
-                None,
-                act,
-                prec,
-            )),
-        }
-    }
-
-    fn linear_residual_cl(
-        x: FloatTensor<Self>,
-        w: FloatTensor<Self>,
-        b: FloatTensor<Self>,
-        r: FloatTensor<Self>,
-        act: bool,
-        slope: f32,
-        bf16: bool,
-    ) -> FloatTensor<Self> {
-        let act = activation(act, slope);
-        let prec = precision(bf16);
-        match LinearResidualBackward
-            .prepare::<C>([x.node(), w.node(), b.node(), r.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let (xp, wp) = (x.primitive().clone(), w.primitive().clone());
-                let y = linear_forward(&xp, &wp, b.primitive(), Some(r.primitive()), act, prec);
-                prep.finish((xp, wp, y.clone(), act, prec), y)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(linear_forward(
-                x.primitive(),
-                w.primitive(),
-                b.primitive(),
-                Some(r.primitive()),
-                act,
-                prec,
-            )),
-        }
-    }
 }
 
 /// Weight and bias of a `Conv3d` (a zero bias when it has none).
@@ -545,39 +334,6 @@ pub fn conv3d(
         leaky.unwrap_or(0.0),
         prec == Precision::Bf16,
     ))
-}
-
-/// A 1x1x1 `conv` on rows `[rows, Cin]`, plus `residual` `[rows, Cout]` when given, then
-/// LeakyReLU with slope `leaky` when given; GEMMs in `prec`.
-pub fn linear(
-    x: Tensor<2>,
-    conv: &Conv3d,
-    residual: Option<Tensor<2>>,
-    leaky: Option<f32>,
-    prec: Precision,
-) -> Tensor<2> {
-    let (w, b) = params(conv);
-    let (act, slope) = (leaky.is_some(), leaky.unwrap_or(0.0));
-    let bf16 = prec == Precision::Bf16;
-    Tensor::from_dispatch(match residual {
-        Some(r) => <Dispatch as PonqCpuOps>::linear_residual_cl(
-            x.into_dispatch(),
-            w.into_dispatch(),
-            b.into_dispatch(),
-            r.into_dispatch(),
-            act,
-            slope,
-            bf16,
-        ),
-        None => <Dispatch as PonqCpuOps>::linear_cl(
-            x.into_dispatch(),
-            w.into_dispatch(),
-            b.into_dispatch(),
-            act,
-            slope,
-            bf16,
-        ),
-    })
 }
 
 /// The five decoders fused ([`mod@decoders`]) on feature rows `[rows, W]` with the flat

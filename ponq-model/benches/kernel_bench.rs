@@ -81,6 +81,38 @@ fn main() {
                 3,
             );
             row("weight gradient", t, flops);
+            if prec == Precision::F32 {
+                // The Winograd form (used from ponq_model::fast::winograd::MIN_CHANNELS
+                // channels); GFLOP/s counted as the direct form's work, so comparable.
+                use ponq_model::fast::winograd;
+                let t = best(
+                    || {
+                        std::hint::black_box(winograd::conv_forward(
+                            &x,
+                            &s,
+                            &w,
+                            Some(&b),
+                            Act::Leaky(0.01),
+                        ));
+                    },
+                    3,
+                );
+                row("Winograd forward", t, flops);
+                let t = best(
+                    || drop(std::hint::black_box(winograd::conv_input_grad(&s, &w, &gz))),
+                    3,
+                );
+                row("Winograd input gradient", t, flops);
+                let t = best(
+                    || {
+                        drop(std::hint::black_box(winograd::conv_weight_grad(
+                            &x, &s, &gz,
+                        )))
+                    },
+                    3,
+                );
+                row("Winograd weight gradient", t, flops);
+            }
             let rows = s.out_rows();
             let wl: Vec<f32> = values(c * c, 5).iter().map(|v| v * 0.1).collect();
             let lf = 2.0 * (rows * c * c) as f64;

@@ -21,6 +21,7 @@ pub mod decoders;
 pub mod kernels;
 pub mod ops;
 pub mod sparse;
+pub mod winograd;
 
 use burn::prelude::*;
 

@@ -22,6 +22,7 @@ use burn::tensor::DType;
 
 use super::decoders::{self, DecoderShape};
 use super::kernels::{self, Act, ConvShape, Precision};
+use super::winograd;
 
 /// The fused layers of the PoNQ network on the CPU.
 ///
@@ -124,8 +125,12 @@ fn conv_forward(
     act: Act,
     prec: Precision,
 ) -> FlexTensor {
-    let packed = kernels::pack_weight(&values(w), s, false);
-    let y = kernels::conv_forward(&values(x), s, &packed, Some(&values(b)), act, prec);
+    let y = if winograd::applies(s, prec) {
+        winograd::conv_forward(&values(x), s, &values(w), Some(&values(b)), act)
+    } else {
+        let packed = kernels::pack_weight(&values(w), s, false);
+        kernels::conv_forward(&values(x), s, &packed, Some(&values(b)), act, prec)
+    };
     let o = s.out_dims();
     tensor(y, vec![s.batch, o[0], o[1], o[2], s.cout])
 }
@@ -197,11 +202,19 @@ impl Backward<Flex, 3> for ConvBackward {
             );
         }
         if let Some(node) = node_w {
-            let gw = kernels::conv_weight_grad(&values(&x), &s, &gz, prec);
+            let gw = if winograd::applies(&s, prec) {
+                winograd::conv_weight_grad(&values(&x), &s, &gz)
+            } else {
+                kernels::conv_weight_grad(&values(&x), &s, &gz, prec)
+            };
             grads.register::<Flex>(node.id, tensor(gw, dims(&w)));
         }
         if let Some(node) = node_x {
-            let gx = kernels::conv_input_grad(&s, &values(&w), &gz, prec);
+            let gx = if winograd::applies(&s, prec) {
+                winograd::conv_input_grad(&s, &values(&w), &gz)
+            } else {
+                kernels::conv_input_grad(&s, &values(&w), &gz, prec)
+            };
             grads.register::<Flex>(node.id, tensor(gx, dims(&x)));
         }
     }

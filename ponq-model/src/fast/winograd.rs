@@ -895,19 +895,14 @@ mod tests {
                 })
                 .collect();
             assert!(rel(&y, &want) < 1e-5, "{s:?}: forward {}", rel(&y, &want));
-            // Input gradient: dX[p, ci] = sum dZ[q, co] W[co, ci, q - p + 1].
-            let gx = conv_input_grad(&s, &w, &gz);
-            let t = s.transposed();
-            let want = conv_ref(&gz, &t, &flip_filters(&w, cin, cout));
-            assert!(
-                rel(&gx, &want) < 1e-5,
-                "{s:?}: input grad {}",
-                rel(&gx, &want)
-            );
-            // Weight gradient: dW[co, ci, o] = sum_p dZ[p, co] X[p + o - 1, ci].
+            // Weight gradient dW[co, ci, o] = sum_p dZ[p, co] X[p + o - 1, ci] and input
+            // gradient dX[p + o - 1, ci] = sum dZ[p, co] W[co, ci, o], straight from the
+            // definition (y[p] reads x[p + o - 1] through offset o).
             let gw = conv_weight_grad(&x, &s, &gz);
+            let gx = conv_input_grad(&s, &w, &gz);
             let o = s.dims;
             let mut want = vec![0.0f64; w.len()];
+            let mut want_x = vec![0.0f64; x.len()];
             for bb in 0..batch {
                 for i in 0..o[0] {
                     for j in 0..o[1] {
@@ -924,9 +919,11 @@ mod tests {
                                     + p[2] as usize;
                                 for co in 0..cout {
                                     for ci in 0..cin {
+                                        let g = f64::from(gz[row * cout + co]);
                                         want[(co * cin + ci) * 27 + off] +=
-                                            f64::from(gz[row * cout + co])
-                                                * f64::from(x[xr * cin + ci]);
+                                            g * f64::from(x[xr * cin + ci]);
+                                        want_x[xr * cin + ci] +=
+                                            g * f64::from(w[(co * cin + ci) * 27 + off]);
                                     }
                                 }
                             }
@@ -938,6 +935,11 @@ mod tests {
                 rel(&gw, &want) < 1e-5,
                 "{s:?}: weight grad {}",
                 rel(&gw, &want)
+            );
+            assert!(
+                rel(&gx, &want_x) < 1e-5,
+                "{s:?}: input grad {}",
+                rel(&gx, &want_x)
             );
         }
     }

@@ -27,6 +27,7 @@ pub mod fast;
 pub mod model;
 pub mod prediction;
 pub mod weights;
+pub mod widen;
 
 pub use error::{ModelError, Result};
 pub use fast::Kernels;

@@ -229,6 +229,60 @@ impl PonqNet {
         self.points_per_cell
     }
 
+    /// The device the weights are on.
+    pub(crate) fn device(&self) -> Device {
+        self.input.weight.device()
+    }
+
+    fn decoders_ref(&self) -> [&Decoder; 5] {
+        [
+            &self.decoder_points,
+            &self.decoder_normals,
+            &self.decoder_cholesky,
+            &self.decoder_vstars,
+            &self.decoder_occupancy,
+        ]
+    }
+
+    /// Every convolution in a fixed order (input layer, encoder, each decoder's blocks and
+    /// head), with whether its input and its output channels are the hidden width (the
+    /// input layer reads the SDF, the heads write the outputs).
+    pub(crate) fn convs(&self) -> Vec<(&Conv3d, [bool; 2])> {
+        let mut v = vec![(&self.input, [false, true])];
+        v.extend(self.encoder.iter().map(|c| (c, [true, true])));
+        for d in self.decoders_ref() {
+            let layers = d.layers();
+            let n = layers.len();
+            v.extend(
+                layers
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, c)| (c, [true, i + 1 < n])),
+            );
+        }
+        v
+    }
+
+    /// The convolutions of [`PonqNet::convs`], mutable, in the same order.
+    pub(crate) fn convs_mut(&mut self) -> Vec<&mut Conv3d> {
+        let mut v = vec![&mut self.input];
+        v.extend(self.encoder.iter_mut());
+        for d in [
+            &mut self.decoder_points,
+            &mut self.decoder_normals,
+            &mut self.decoder_cholesky,
+            &mut self.decoder_vstars,
+            &mut self.decoder_occupancy,
+        ] {
+            for b in d.blocks.iter_mut() {
+                v.push(&mut b.conv_1);
+                v.push(&mut b.conv_2);
+            }
+            v.push(&mut d.head);
+        }
+        v
+    }
+
     /// The layer implementation this network runs on the CPU (default [`Kernels::Fast`]).
     pub fn kernels(&self) -> Kernels {
         self.kernels

@@ -162,3 +162,61 @@ fn weights_round_trip_exactly() {
     assert!(ponq_model::weights::load(&dir.join("bad.bpk"), &device).is_err());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+fn host(t: Tensor<4>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32")
+}
+
+/// Max |a - b| over max |b|.
+fn rel(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(1e-12f32, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+        / scale
+}
+
+#[test]
+fn widened_network_computes_the_same_function() {
+    let device = backend::cpu();
+    let config = PonqNetConfig::new()
+        .with_width(8)
+        .with_points_per_cell(2)
+        .with_encoder_layers(2)
+        .with_decoder_blocks(2);
+    let n = 7;
+    let frame = GridFrame::whole(n);
+    for kernels in [ponq_model::Kernels::Stock, ponq_model::Kernels::Fast] {
+        let net = config.init(&device).with_kernels(kernels);
+        let (wide, wide_config) = ponq_model::widen::widen(&net, &config, 13, 5).expect("widen");
+        assert_eq!(wide_config.width, 13);
+        assert_eq!(wide.kernels(), kernels);
+        assert_eq!(wide.num_params(), wide_config.init(&device).num_params());
+        assert!(wide.num_params() > net.num_params());
+        let a = net.forward(ramp(n, &device), &frame);
+        let b = wide.forward(ramp(n, &device), &frame);
+        for (name, x, y) in [
+            ("points", a.points, b.points),
+            ("normals", a.normals, b.normals),
+            ("cholesky", a.cholesky, b.cholesky),
+            ("vstars", a.vstars, b.vstars),
+        ] {
+            let e = rel(&host(y), &host(x));
+            assert!(e < 1e-5, "{kernels:?}: {name} differs by {e}");
+        }
+        let e = rel(
+            &host(b.occupancy.reshape([1, 1, 1, n * n * n])),
+            &host(a.occupancy.reshape([1, 1, 1, n * n * n])),
+        );
+        assert!(e < 1e-5, "{kernels:?}: occupancy differs by {e}");
+    }
+    // Same width: the same network; narrower: an error.
+    let net = config.init(&device);
+    let (same, _) = ponq_model::widen::widen(&net, &config, 8, 1).expect("same width");
+    let a = host(net.forward(ramp(n, &device), &frame).points);
+    let b = host(same.forward(ramp(n, &device), &frame).points);
+    assert_eq!(a, b);
+    assert!(ponq_model::widen::widen(&net, &config, 7, 1).is_err());
+}

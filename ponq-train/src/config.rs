@@ -183,7 +183,9 @@ pub struct TrainSection {
     pub augment: bool,
     /// Seed of everything random in the run (initial weights aside: Burn seeds those).
     pub seed: u64,
-    /// Start from this checkpoint's weights (the previous phase); relative to the config.
+    /// Start from this checkpoint's weights (the previous phase); relative to the config. A
+    /// network that differs from `[model]` only by a smaller width is widened to it
+    /// (Net2Wider: it starts with the same outputs; `ponq_model::widen`).
     pub init_from: Option<PathBuf>,
     /// Validation losses every this many epochs (0: never).
     pub validate_every: usize,

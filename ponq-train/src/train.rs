@@ -15,7 +15,7 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use indicatif::{ProgressBar, ProgressStyle};
-use ponq_model::{PonqNet, Prediction};
+use ponq_model::{PonqNet, PonqNetConfig, Prediction};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -183,13 +183,7 @@ fn checkpoint_dir(out: &Path) -> Option<PathBuf> {
 
 /// Loads weights saved by [`ponq_model::weights::save`] (a checkpoint folder or a `.bpk`).
 pub fn load_weights(path: &Path, cfg: &TrainConfig, device: &Device) -> Result<PonqNet> {
-    let file = if path.is_dir() {
-        path.join("model.bpk")
-    } else {
-        path.to_path_buf()
-    };
-    let (model, net) = ponq_model::weights::load(&file, device)
-        .with_context(|| format!("cannot load weights {}", file.display()))?;
+    let (model, net, file) = read_weights(path, device)?;
     if net != cfg.model.net() {
         bail!(
             "{} holds a network {net:?}, the config asks for {:?}",
@@ -198,6 +192,58 @@ pub fn load_weights(path: &Path, cfg: &TrainConfig, device: &Device) -> Result<P
         );
     }
     Ok(model)
+}
+
+/// The network `train.init_from` names, as [`load_weights`] does; where the config asks for
+/// the same network wider (only `model.width` larger), that network widened to it
+/// (`ponq_model::widen`: the same function, new channels copying old ones, seeded by
+/// `train.seed`).
+pub fn init_weights(
+    path: &Path,
+    cfg: &TrainConfig,
+    device: &Device,
+    quiet: bool,
+) -> Result<PonqNet> {
+    let (model, net, file) = read_weights(path, device)?;
+    let want = cfg.model.net();
+    if net == want {
+        return Ok(model);
+    }
+    let same_but_width = PonqNetConfig {
+        width: want.width,
+        ..net.clone()
+    } == want;
+    if !same_but_width || want.width < net.width {
+        bail!(
+            "{} holds a network {net:?}, the config asks for {want:?} (only a wider network \
+             can start from it)",
+            file.display()
+        );
+    }
+    if !quiet {
+        eprintln!(
+            "widening {} from width {} to {} (Net2Wider: the same outputs to start with)",
+            file.display(),
+            net.width,
+            want.width
+        );
+    }
+    let (wide, _) = ponq_model::widen::widen(&model, &net, want.width, cfg.train.seed)
+        .with_context(|| format!("widening {}", file.display()))?;
+    Ok(wide)
+}
+
+/// The network saved at `path` (a `.bpk` file or a directory holding `model.bpk`), its
+/// config and the file read.
+fn read_weights(path: &Path, device: &Device) -> Result<(PonqNet, PonqNetConfig, PathBuf)> {
+    let file = if path.is_dir() {
+        path.join("model.bpk")
+    } else {
+        path.to_path_buf()
+    };
+    let (model, net) = ponq_model::weights::load(&file, device)
+        .with_context(|| format!("cannot load weights {}", file.display()))?;
+    Ok((model, net, file))
 }
 
 fn bar(quiet: bool, len: u64, msg: &str) -> ProgressBar {
@@ -429,7 +475,7 @@ pub fn run_with_shapes(
         if !opts.quiet {
             eprintln!("starting from the weights of {}", init.display());
         }
-        load_weights(init, cfg, &device)?
+        init_weights(init, cfg, &device, opts.quiet)?
     } else {
         // Seeded initial weights (the seed may be global to the backend).
         device.seed(cfg.train.seed);

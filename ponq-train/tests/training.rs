@@ -524,3 +524,69 @@ fn extra_resolutions_are_trained_on() {
     assert!(s.step_losses.iter().all(|l| l.is_finite()));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn init_from_a_narrower_network_widens_it() {
+    let mut cfg = smoke_config();
+    cfg.train.epochs = 1;
+    let dev = backend::cpu();
+    let dir = tmp("widen");
+    std::fs::create_dir_all(&dir).unwrap();
+    let init_file = dir.join("narrow.bpk");
+    let narrow = cfg.model.net();
+    let narrow_net = narrow.init(&dev);
+    ponq_model::weights::save(&narrow_net, &narrow, &init_file).unwrap();
+    cfg.train.init_from = Some(init_file.clone());
+    cfg.model.width = narrow.width + 5;
+    // The widened start computes what the saved network computes.
+    let wide = ponq_train::train::init_weights(&init_file, &cfg, &dev, true).unwrap();
+    assert_eq!(
+        ponq_model::weights::load(&init_file, &dev).unwrap().1.width,
+        narrow.width
+    );
+    let (train, val) = shapes();
+    let x = ponq_train::data::Batcher {
+        device: dev.clone(),
+    }
+    .batch(&[make_item(
+        &train[0],
+        &ItemOptions {
+            crop: 0,
+            samples: 100,
+            augment: false,
+        },
+        &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+    )])
+    .unwrap();
+    let frame = ponq_train::data::item_frame(8);
+    let a = narrow_net.forward(x.clone(), &frame).points;
+    let b = wide.forward(x, &frame).points;
+    let diff = (a.clone() - b).abs().max().into_scalar::<f32>();
+    let scale = a.abs().max().into_scalar::<f32>();
+    assert!(diff <= 1e-5 * scale, "{diff} vs {scale}");
+    // A run starts from it and saves the wider network.
+    let out = tmp("widen-run");
+    run_with_shapes(
+        &cfg,
+        &train,
+        &val,
+        &RunOptions {
+            out: out.clone(),
+            resume: false,
+            device: dev.clone(),
+            quiet: true,
+            kernels: ponq_model::Kernels::default(),
+            extra_devices: Vec::new(),
+        },
+    )
+    .unwrap();
+    let (_, saved) = ponq_model::weights::load(&out.join("model.bpk"), &dev).unwrap();
+    assert_eq!(saved.width, narrow.width + 5);
+    // Anything but a wider width is refused, with the reason.
+    cfg.model.width = narrow.width;
+    cfg.model.points_per_cell = narrow.points_per_cell + 1;
+    let e = ponq_train::train::init_weights(&init_file, &cfg, &dev, true).unwrap_err();
+    assert!(format!("{e:#}").contains("only a wider network"), "{e:#}");
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -1,5 +1,6 @@
 //! The model shipped in the repository's `models/` folder (`ponq-cpu.bpk` + `.json`, trained
-//! with `configs/cpu-w48.toml`; see `models/README.md`). It is also built into the programs, so an
+//! with `configs/cpu-w64.toml` from the width-48 model of `configs/cpu-w48.toml`; see
+//! `models/README.md`). It is also built into the programs, so an
 //! installed `ponq-infer` needs no file beside it.
 
 use std::path::PathBuf;

@@ -164,7 +164,10 @@ fn weights_round_trip_exactly() {
 }
 
 fn host(t: Tensor<4>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32")
+    t.into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("f32")
 }
 
 /// Max |a - b| over max |b|.

@@ -3,14 +3,14 @@
 //! forward and training step, with their GFLOP/s, peak memory, and the machine's f32 GEMM
 //! rate (one large `gemm` call) as the ceiling.
 //!
-//! `cargo bench -p ponq-train --bench train_bench [REPS] [paper|cpu|w48]` (default 3
+//! `cargo bench -p ponq-train --bench train_bench [REPS] [paper|cpu|w48|w64]` (default 3
 //! repetitions, medians, all cases; the stock and fast runs alternate so that the machine's drift hits
 //! both alike).
 //! `ponq-train/benches/side_by_side.sh` also runs the same network in PyTorch.
 //!
 //! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipes'
-//! networks (`configs/cpu.toml`, width 32, and the shipped `configs/cpu-w48.toml`, width 48) on
-//! 17^3-node crops, batch 1 and 8 (width 48: 8).
+//! networks (`configs/cpu.toml`, width 32, `configs/cpu-w48.toml`, width 48, and the shipped
+//! `configs/cpu-w64.toml`, width 64) on 17^3-node crops, batch 1 and 8 (widths 48 / 64: 8).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -251,7 +251,7 @@ fn main() {
     let want = |case: &str| {
         !args
             .iter()
-            .any(|a| ["paper", "cpu", "w48"].contains(&a.as_str()))
+            .any(|a| ["paper", "cpu", "w48", "w64"].contains(&a.as_str()))
             || args.iter().any(|a| a == case)
     };
     println!(
@@ -284,7 +284,14 @@ fn main() {
         bench("cpu.toml (width 32)", cpu.clone(), 8, 16, 16_000, reps);
     }
     if want("w48") {
-        let w48 = ModelSection { width: 48, ..cpu };
+        let w48 = ModelSection {
+            width: 48,
+            ..cpu.clone()
+        };
         bench("cpu-w48.toml (width 48)", w48, 8, 16, 16_000, reps);
+    }
+    if want("w64") {
+        let w64 = ModelSection { width: 64, ..cpu };
+        bench("cpu-w64.toml (width 64)", w64, 8, 16, 16_000, reps);
     }
 }

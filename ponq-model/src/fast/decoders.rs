@@ -694,7 +694,7 @@ pub fn backward(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fast::kernels::tests::lcg;
+    use crate::fast::kernels::tests::{lcg, on_threads};
 
     const SLOPE: f64 = crate::model::LEAKY_SLOPE;
 
@@ -882,16 +882,12 @@ mod tests {
         let theta: Vec<f32> = lcg(8, s.params()).iter().map(|v| v * 0.25).collect();
         let gout = lcg(9, rows * s.total_outputs());
         let run = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("thread pool")
-                .install(|| {
-                    (
-                        forward(&x, &s, &theta, Precision::F32),
-                        backward(&x, &s, &theta, &gout, true, true, Precision::F32),
-                    )
-                })
+            on_threads(threads, || {
+                (
+                    forward(&x, &s, &theta, Precision::F32),
+                    backward(&x, &s, &theta, &gout, true, true, Precision::F32),
+                )
+            })
         };
         let (y1, g1) = run(1);
         let (y3, g3) = run(3);

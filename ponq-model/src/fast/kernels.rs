@@ -917,8 +917,17 @@ pub(super) mod tests {
             .collect()
     }
 
+    /// `f()` on a pool of `threads` threads (results must not depend on the count).
+    pub(in crate::fast) fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("thread pool")
+            .install(f)
+    }
+
     /// Direct (six nested loops) convolution on channels-last data.
-    fn conv_naive(x: &[f32], s: &ConvShape, w: &[f32], b: &[f32]) -> Vec<f32> {
+    pub(in crate::fast) fn conv_naive(x: &[f32], s: &ConvShape, w: &[f32], b: &[f32]) -> Vec<f32> {
         let o = s.out_dims();
         let (k, cin, cout) = (s.k, s.cin, s.cout);
         let mut y = vec![0.0f32; s.out_rows() * cout];
@@ -1282,39 +1291,35 @@ pub(super) mod tests {
         let w = lcg(13, s.cout * s.cin * 27);
         let g = lcg(14, s.out_rows() * s.cout);
         let run = |threads: usize, prec: Precision| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| {
-                    let (gx, gw) =
-                        linear_backward(&x[..s.out_rows() * 5], 5, &w[..30], &g, 6, true, true);
-                    let all = LinearNeeds {
-                        x: true,
-                        w: true,
-                        b: true,
-                        z: true,
-                    };
-                    let fused = linear_grads(
-                        &x[..s.out_rows() * 5],
-                        5,
-                        &w[..30],
-                        &g,
-                        &g,
-                        Act::Leaky(0.2),
-                        6,
-                        all,
-                        prec,
-                    );
-                    (
-                        conv_weight_grad(&x, &s, &g, prec),
-                        conv_input_grad(&s, &w, &g, prec),
-                        column_sums(&g, s.cout),
-                        gx.unwrap(),
-                        gw.unwrap(),
-                        (fused.x, fused.w, fused.b, fused.z),
-                    )
-                })
+            on_threads(threads, || {
+                let (gx, gw) =
+                    linear_backward(&x[..s.out_rows() * 5], 5, &w[..30], &g, 6, true, true);
+                let all = LinearNeeds {
+                    x: true,
+                    w: true,
+                    b: true,
+                    z: true,
+                };
+                let fused = linear_grads(
+                    &x[..s.out_rows() * 5],
+                    5,
+                    &w[..30],
+                    &g,
+                    &g,
+                    Act::Leaky(0.2),
+                    6,
+                    all,
+                    prec,
+                );
+                (
+                    conv_weight_grad(&x, &s, &g, prec),
+                    conv_input_grad(&s, &w, &g, prec),
+                    column_sums(&g, s.cout),
+                    gx.unwrap(),
+                    gw.unwrap(),
+                    (fused.x, fused.w, fused.b, fused.z),
+                )
+            })
         };
         for prec in [Precision::F32, Precision::Bf16] {
             let one = run(1, prec);

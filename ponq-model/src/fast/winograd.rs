@@ -802,46 +802,14 @@ pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fast::kernels::tests::lcg;
+    use crate::fast::kernels::tests::{conv_naive, lcg, on_threads};
 
-    /// f64 direct convolution (3x3x3, padding 1) of channels-last data, no bias.
+    /// The direct convolution of [`super::super::kernels`]' tests (f64 sums), no bias.
     fn conv_ref(x: &[f32], s: &ConvShape, w: &[f32]) -> Vec<f64> {
-        let o = s.dims;
-        let (cin, cout) = (s.cin, s.cout);
-        let mut y = vec![0.0f64; s.out_rows() * cout];
-        for b in 0..s.batch {
-            for i in 0..o[0] {
-                for j in 0..o[1] {
-                    for l in 0..o[2] {
-                        let row = ((b * o[0] + i) * o[1] + j) * o[2] + l;
-                        for a in 0..3 {
-                            for c in 0..3 {
-                                for e in 0..3 {
-                                    let p = [i + a, j + c, l + e].map(|v| v as isize - 1);
-                                    if (0..3).any(|ax| p[ax] < 0 || p[ax] >= o[ax] as isize) {
-                                        continue;
-                                    }
-                                    let xr = ((b * o[0] + p[0] as usize) * o[1] + p[1] as usize)
-                                        * o[2]
-                                        + p[2] as usize;
-                                    for co in 0..cout {
-                                        let mut acc = 0.0f64;
-                                        for ci in 0..cin {
-                                            acc += f64::from(x[xr * cin + ci])
-                                                * f64::from(
-                                                    w[(co * cin + ci) * 27 + (a * 3 + c) * 3 + e],
-                                                );
-                                        }
-                                        y[row * cout + co] += acc;
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        y
+        conv_naive(x, s, w, &vec![0.0; s.cout])
+            .into_iter()
+            .map(f64::from)
+            .collect()
     }
 
     fn shape(batch: usize, dims: [usize; 3], cin: usize, cout: usize) -> ConvShape {
@@ -952,16 +920,12 @@ mod tests {
         let w = lcg(8, 3 * 4 * 27);
         let gz = lcg(9, s.out_rows() * 3);
         let run = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool")
-                .install(|| {
-                    (
-                        conv_forward(&x, &s, &w, None, Act::Identity),
-                        conv_weight_grad(&x, &s, &gz),
-                    )
-                })
+            on_threads(threads, || {
+                (
+                    conv_forward(&x, &s, &w, None, Act::Identity),
+                    conv_weight_grad(&x, &s, &gz),
+                )
+            })
         };
         let (y1, g1) = run(1);
         let (y3, g3) = run(3);

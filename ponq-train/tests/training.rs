@@ -79,6 +79,18 @@ fn crops_and_rotations_keep_samples_on_the_surface() {
     }
 }
 
+/// Options of a quiet run on `device` with the default kernels, writing to `out`.
+fn opts(out: PathBuf, resume: bool, device: burn::prelude::Device) -> RunOptions {
+    RunOptions {
+        out,
+        resume,
+        device,
+        quiet: true,
+        kernels: ponq_model::Kernels::default(),
+        extra_devices: Vec::new(),
+    }
+}
+
 fn smoke_config() -> TrainConfig {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/smoke.toml");
     let mut cfg = TrainConfig::load(&path).expect("configs/smoke.toml parses");
@@ -104,14 +116,7 @@ fn smoke_training_loss_falls() {
     cfg.train.lr = 1e-2;
     let (train, val) = shapes();
     let out = tmp("falls");
-    let opts = RunOptions {
-        out: out.clone(),
-        resume: false,
-        device: backend::cpu(),
-        quiet: true,
-        kernels: ponq_model::Kernels::default(),
-        extra_devices: Vec::new(),
-    };
+    let opts = opts(out.clone(), false, backend::cpu());
     let s = run_with_shapes(&cfg, &train, &val, &opts).expect("training runs");
     assert_eq!(s.epochs_done, 20);
     let k = 4;
@@ -153,52 +158,13 @@ fn resume_repeats_the_uninterrupted_run() {
     ponq_model::weights::save(&net.init(&dev), &net, &init_file).unwrap();
     cfg.train.init_from = Some(init_file);
     let a = tmp("whole");
-    let whole = run_with_shapes(
-        &cfg,
-        &train,
-        &val,
-        &RunOptions {
-            out: a.clone(),
-            resume: false,
-            device: dev.clone(),
-            quiet: true,
-            kernels: ponq_model::Kernels::default(),
-            extra_devices: Vec::new(),
-        },
-    )
-    .unwrap();
+    let whole = run_with_shapes(&cfg, &train, &val, &opts(a.clone(), false, dev.clone())).unwrap();
     // Interrupted after epoch 2, then resumed.
     let b = tmp("parts");
     cfg.train.epochs = 2;
-    let first = run_with_shapes(
-        &cfg,
-        &train,
-        &val,
-        &RunOptions {
-            out: b.clone(),
-            resume: false,
-            device: dev.clone(),
-            quiet: true,
-            kernels: ponq_model::Kernels::default(),
-            extra_devices: Vec::new(),
-        },
-    )
-    .unwrap();
+    let first = run_with_shapes(&cfg, &train, &val, &opts(b.clone(), false, dev.clone())).unwrap();
     cfg.train.epochs = 3;
-    let rest = run_with_shapes(
-        &cfg,
-        &train,
-        &val,
-        &RunOptions {
-            out: b.clone(),
-            resume: true,
-            device: dev,
-            quiet: true,
-            kernels: ponq_model::Kernels::default(),
-            extra_devices: Vec::new(),
-        },
-    )
-    .unwrap();
+    let rest = run_with_shapes(&cfg, &train, &val, &opts(b.clone(), true, dev)).unwrap();
     assert_eq!(rest.epochs_done, 3);
     // Totals add up across the interrupted run and its continuation.
     assert_eq!(rest.total_steps, whole.total_steps);
@@ -400,20 +366,8 @@ fn micro_batches_take_the_whole_batch_step() {
         cfg.train.micro_batches = micro;
         cfg.check().unwrap();
         let out = tmp(&format!("micro-{micro}"));
-        let s = run_with_shapes(
-            &cfg,
-            &train,
-            &val,
-            &RunOptions {
-                out: out.clone(),
-                resume: false,
-                device: dev.clone(),
-                quiet: true,
-                kernels: ponq_model::Kernels::default(),
-                extra_devices: Vec::new(),
-            },
-        )
-        .unwrap();
+        let s =
+            run_with_shapes(&cfg, &train, &val, &opts(out.clone(), false, dev.clone())).unwrap();
         let model = ponq_train::train::load_weights(&out.join("model.bpk"), &cfg, &dev).unwrap();
         let flat = params(&model);
         std::fs::remove_dir_all(&out).ok();
@@ -455,19 +409,12 @@ fn excluded_shapes_stop_the_run() {
     let (train, val) = shapes();
     let dir = tmp("exclude");
     std::fs::create_dir_all(&dir).unwrap();
-    let opts = |out: &str| RunOptions {
-        out: dir.join(out),
-        resume: false,
-        device: backend::cpu(),
-        quiet: true,
-        kernels: ponq_model::Kernels::default(),
-        extra_devices: Vec::new(),
-    };
+    let run_opts = |out: &str| opts(dir.join(out), false, backend::cpu());
     // Shape "c" (training) and then "v" (validation) are excluded.
     for (list, id) in [("zz\nc\n", "c"), ("v\n", "v")] {
         std::fs::write(dir.join("never.txt"), list).unwrap();
         cfg.data.exclude = Some(dir.join("never.txt"));
-        let err = run_with_shapes(&cfg, &train, &val, &opts("run"))
+        let err = run_with_shapes(&cfg, &train, &val, &run_opts("run"))
             .expect_err("an excluded shape stops the run")
             .to_string();
         assert!(err.contains(&format!("shape {id},")), "{err}");
@@ -475,7 +422,7 @@ fn excluded_shapes_stop_the_run() {
     }
     // Ids that are not in the data do not matter.
     std::fs::write(dir.join("never.txt"), "Advanced_GEB\nother\n").unwrap();
-    let s = run_with_shapes(&cfg, &train, &val, &opts("ok")).expect("runs");
+    let s = run_with_shapes(&cfg, &train, &val, &run_opts("ok")).expect("runs");
     assert_eq!(s.epochs_done, 1);
     // The shipped recipe excludes the 105 shared evaluation meshes.
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -497,14 +444,7 @@ fn extra_resolutions_are_trained_on() {
     let (train, val) = shapes();
     let dir = tmp("extra-res");
     std::fs::create_dir_all(&dir).unwrap();
-    let opts = RunOptions {
-        out: dir.join("run"),
-        resume: false,
-        device: backend::cpu(),
-        quiet: true,
-        kernels: ponq_model::Kernels::default(),
-        extra_devices: Vec::new(),
-    };
+    let opts = opts(dir.join("run"), false, backend::cpu());
     let err = run_with_shapes(&cfg, &train, &val, &opts)
         .expect_err("no shape has a 16^3 grid")
         .to_string();
@@ -566,20 +506,7 @@ fn init_from_a_narrower_network_widens_it() {
     assert!(diff <= 1e-5 * scale, "{diff} vs {scale}");
     // A run starts from it and saves the wider network.
     let out = tmp("widen-run");
-    run_with_shapes(
-        &cfg,
-        &train,
-        &val,
-        &RunOptions {
-            out: out.clone(),
-            resume: false,
-            device: dev.clone(),
-            quiet: true,
-            kernels: ponq_model::Kernels::default(),
-            extra_devices: Vec::new(),
-        },
-    )
-    .unwrap();
+    run_with_shapes(&cfg, &train, &val, &opts(out.clone(), false, dev.clone())).unwrap();
     let (_, saved) = ponq_model::weights::load(&out.join("model.bpk"), &dev).unwrap();
     assert_eq!(saved.width, narrow.width + 5);
     // Anything but a wider width is refused, with the reason.

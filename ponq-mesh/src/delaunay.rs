@@ -29,7 +29,9 @@ use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize};
 
 use crate::error::{Error, Result};
-use crate::predicates::{in_conflict_bounded, orient3d, static_insphere_bound};
+use crate::predicates::{
+    in_conflict_bounded, orient3d, orient3d_bounded, static_insphere_bound, static_orient_bound,
+};
 
 /// Marker for "no neighbour" (a face on the boundary of the triangulated region).
 pub const NONE: u32 = u32::MAX;
@@ -360,36 +362,52 @@ const DEAD: u32 = 0;
 /// The mark of a live tet that carries no stamp of the insertion holding it.
 const NO_STAMP: u32 = 1;
 
-/// `LINK_FACES[k]`: for a new tet made from the face opposite its vertex `k` (the new vertex
-/// at position `k`), its three other faces `f`, each with the two positions other than `f`
-/// and `k`: the edge it shares with the neighbouring new tet across that face.
-const LINK_FACES: [[(u8, usize, usize); 3]; 4] = {
-    let mut t = [[(0u8, 0usize, 0usize); 3]; 4];
+/// `APEX_FACE[k]`: the positions of the face opposite position `k`, ordered so that the
+/// vertex at `k` is on the face's positive side (`(APEX_FACE[k], k)` is an even permutation of
+/// `0..4`, so for a positively oriented tet `orient3d(face..., t[k]) > 0`).
+const APEX_FACE: [[usize; 3]; 4] = [[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]];
+
+/// `APEX_EDGES[k]`: for a new tet with the new vertex at position `k`, the three directed
+/// edges `(x, y)` of its boundary face (ordered by [`APEX_FACE`]), each with the face `f`
+/// (the position of the face's third vertex) that the tet shares with the new tet across
+/// that edge.
+const APEX_EDGES: [[(usize, usize, u8); 3]; 4] = {
+    let mut t = [[(0usize, 0usize, 0u8); 3]; 4];
     let mut k = 0;
     while k < 4 {
-        let mut n = 0;
-        let mut f = 0;
-        while f < 4 {
-            if f != k {
-                let mut e = [0usize; 2];
-                let mut m = 0;
-                let mut s = 0;
-                while s < 4 {
-                    if s != f && s != k {
-                        e[m] = s;
-                        m += 1;
-                    }
-                    s += 1;
-                }
-                t[k][n] = (f as u8, e[0], e[1]);
-                n += 1;
-            }
-            f += 1;
-        }
+        let [a, b, c] = APEX_FACE[k];
+        t[k] = [(a, b, c as u8), (b, c, a as u8), (c, a, b as u8)];
         k += 1;
     }
     t
 };
+
+/// Cavities whose boundary has at most this many vertices are linked by
+/// [`Worker::link_small`] (a Delaunay cavity in 3D has about 16 on average).
+const SMALL_CAVITY: usize = 32;
+
+/// A slot of a worker's directed-edge table (see [`Worker::insert`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct EdgeSlot {
+    key: u64,
+    tet: u32,
+    generation: u32,
+}
+
+/// The key of the directed edge `x -> y`.
+#[inline(always)]
+fn edge_key(x: u32, y: u32) -> u64 {
+    ((x as u64) << 32) | y as u64
+}
+
+/// Pushes `x` and takes it back unless `keep`: a conditional push without a branch on
+/// `keep` (the capacity check and the truncation's length check are predictable).
+#[inline(always)]
+fn push_if<T: Copy>(v: &mut Vec<T>, x: T, keep: bool) {
+    v.push(x);
+    let len = v.len() - (!keep) as usize;
+    v.truncate(len);
+}
 
 /// Inputs smaller than this are triangulated by one thread.
 const PARALLEL_MIN_POINTS: usize = 8192;
@@ -413,6 +431,8 @@ struct Shared<'a> {
     /// Static insphere bound for tets of real vertices only (their differences are bounded by
     /// the extent of the input).
     static_eps: f64,
+    /// Static orientation bound, likewise.
+    static_orient_eps: f64,
     /// Never-used slots for the parallel phase, handed out in blocks: the next one is
     /// `pool.load()`, the last one `tets.len() - 1`.
     pool: Option<&'a AtomicUsize>,
@@ -430,17 +450,28 @@ impl Shared<'_> {
         &self.pos[v as usize]
     }
 
+    /// Whether all four vertices are real (not of the super-tetrahedron).
+    #[inline(always)]
+    fn real(&self, tv: [u32; 4]) -> bool {
+        tv[0].max(tv[1]).max(tv[2].max(tv[3])) < self.n_real
+    }
+
+    /// The orientation of tet `tv` with its vertex `k` replaced by the real point `p`.
     #[inline]
     fn face_sees(&self, tv: [u32; 4], k: usize, p: &[f64; 3]) -> i32 {
         let mut q = [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])];
         q[k] = p;
-        orient3d(q[0], q[1], q[2], q[3])
+        let eps = if self.real(tv) {
+            self.static_orient_eps
+        } else {
+            f64::INFINITY
+        };
+        orient3d_bounded(q[0], q[1], q[2], q[3], eps)
     }
 
     #[inline]
     fn conflicts(&self, tv: [u32; 4], v: u32) -> bool {
-        let n = self.n_real;
-        let eps = if tv[0] < n && tv[1] < n && tv[2] < n && tv[3] < n {
+        let eps = if self.real(tv) {
             self.static_eps
         } else {
             f64::INFINITY
@@ -476,7 +507,8 @@ struct Worker {
     fail_every: u32,
     lock_attempts: u32,
     rng: SplitMix,
-    stack: Vec<u32>,
+    /// Cavity tets still to look around, each with the face it was entered through.
+    stack: Vec<(u32, u8)>,
     cavity: Vec<u32>,
     /// Tets locked (and stamped) by the current insertion: the cavity and its neighbours.
     locked: Vec<u32>,
@@ -484,11 +516,18 @@ struct Worker {
     new_tets: Vec<([u32; 4], u32, u8)>,
     /// Slots taken from `free` / `fresh` for the current insertion.
     taken: Vec<u32>,
-    /// Open-addressing table edge key -> (tet, face, generation) for linking the new tets.
-    /// An entry belongs to the current insertion only if its generation is `generation`, so
-    /// the table is never cleared (but once every 255 insertions).
-    table: Vec<(u64, u32, u8, u8)>,
-    generation: u8,
+    /// Open-addressing table directed edge -> new tet for linking the new tets. An entry
+    /// belongs to the current insertion only if its generation is `generation`, so the table
+    /// is never cleared (but when the generation wraps around).
+    table: Vec<EdgeSlot>,
+    generation: u32,
+    /// Local numbers of the cavity boundary's vertices (see [`Worker::link_small`]), indexed
+    /// by vertex; only the entries of the current boundary mean anything.
+    local_id: Vec<u8>,
+    /// The local numbers of each new tet's boundary face, in [`APEX_FACE`] order.
+    face_ids: Vec<[u8; 3]>,
+    /// `edge_map[x * SMALL_CAVITY + y]`: the new tet with the directed edge `x -> y`.
+    edge_map: Box<[u32; SMALL_CAVITY * SMALL_CAVITY]>,
 }
 
 impl Worker {
@@ -509,8 +548,11 @@ impl Worker {
             boundary: Vec::new(),
             new_tets: Vec::new(),
             taken: Vec::new(),
-            table: vec![(0, 0, 0, 0); 256],
+            table: vec![EdgeSlot::default(); 256],
             generation: 0,
+            local_id: Vec::new(),
+            face_ids: Vec::new(),
+            edge_map: Box::new([0; SMALL_CAVITY * SMALL_CAVITY]),
         }
     }
 
@@ -638,6 +680,120 @@ impl Worker {
         Err(Fail::Busy)
     }
 
+    /// Links the new tets of a cavity whose boundary has at most [`SMALL_CAVITY`] vertices
+    /// (almost every cavity), as HXT does (Marot et al. 2019): the boundary vertices get local
+    /// numbers, each directed edge `x -> y` of a boundary face enters its new tet at
+    /// `map[x][y]`, then each tet reads its neighbour across `x -> y` at `map[y][x]`. No
+    /// hashing, no probing and no branch on the data. Returns `false` (nothing changed) for a
+    /// larger boundary.
+    fn link_small(&mut self, sh: &Shared) -> bool {
+        const L: usize = SMALL_CAVITY;
+        // A triangulated sphere with V vertices has 2V - 4 faces.
+        if self.new_tets.len() > 2 * L - 4 {
+            return false;
+        }
+        if self.local_id.len() < sh.pos.len() {
+            self.local_id.resize(sh.pos.len(), 0);
+        }
+        for &(tv, _, k) in &self.new_tets {
+            for p in APEX_FACE[k as usize] {
+                self.local_id[tv[p] as usize] = u8::MAX;
+            }
+        }
+        // At most 3 * 60 vertex visits: a count below 255 never meets the marker.
+        let mut count = 0u8;
+        self.face_ids.clear();
+        for &(tv, _, k) in &self.new_tets {
+            let ids = APEX_FACE[k as usize].map(|p| {
+                let x = tv[p] as usize;
+                let cur = self.local_id[x];
+                let fresh = cur == u8::MAX;
+                let id = if fresh { count } else { cur };
+                self.local_id[x] = id;
+                count += fresh as u8;
+                id
+            });
+            self.face_ids.push(ids);
+        }
+        if count as usize > L {
+            return false;
+        }
+        let map = &mut self.edge_map;
+        for (&(_, id, _), l) in self.new_tets.iter().zip(&self.face_ids) {
+            let l = l.map(|x| x as usize);
+            map[l[0] * L + l[1]] = id;
+            map[l[1] * L + l[2]] = id;
+            map[l[2] * L + l[0]] = id;
+        }
+        for (&(_, id, k), l) in self.new_tets.iter().zip(&self.face_ids) {
+            let l = l.map(|x| x as usize);
+            let [a, b, c] = APEX_FACE[k as usize];
+            let tet = &sh.tets[id as usize];
+            // Across edge (l0, l1) lies the face opposite the face's third vertex, and so on.
+            tet.set_nbr(c, map[l[1] * L + l[0]]);
+            tet.set_nbr(a, map[l[2] * L + l[1]]);
+            tet.set_nbr(b, map[l[0] * L + l[2]]);
+        }
+        true
+    }
+
+    /// Links the new tets of any cavity: an open-addressing table of directed edges. Pass 1
+    /// enters every directed edge, pass 2 looks up every reversed one (twice the probes of one
+    /// "insert or find" pass, but the probes' branches are predictable).
+    fn link_hashed(&mut self, sh: &Shared) {
+        let entries = 3 * self.new_tets.len();
+        let bits = (4 * entries).next_power_of_two().max(256).trailing_zeros();
+        if self.table.len() < 1 << bits {
+            self.table = vec![EdgeSlot::default(); 1 << bits];
+            self.generation = 0;
+        }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.table.iter_mut().for_each(|e| e.generation = 0);
+            self.generation = 1;
+        }
+        let generation = self.generation;
+        // Hash into the first `1 << bits` slots only: the table may have grown for one big
+        // cavity, and spreading small cavities over all of it would miss the cache.
+        let mask = (1usize << bits) - 1;
+        let slot_of = |key: u64| (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - bits)) as usize;
+        for &(tv, id, k) in &self.new_tets {
+            for &(x, y, _) in &APEX_EDGES[k as usize] {
+                let key = edge_key(tv[x], tv[y]);
+                let mut h = slot_of(key);
+                while self.table[h].generation == generation {
+                    h = (h + 1) & mask;
+                }
+                self.table[h] = EdgeSlot {
+                    key,
+                    tet: id,
+                    generation,
+                };
+            }
+        }
+        for &(tv, id, k) in &self.new_tets {
+            let tet = &sh.tets[id as usize];
+            for &(x, y, f) in &APEX_EDGES[k as usize] {
+                let key = edge_key(tv[y], tv[x]);
+                let mut h = slot_of(key);
+                let mut other = NONE;
+                loop {
+                    let slot = self.table[h];
+                    if slot.generation != generation {
+                        break;
+                    }
+                    if slot.key == key {
+                        other = slot.tet;
+                        break;
+                    }
+                    h = (h + 1) & mask;
+                }
+                debug_assert_ne!(other, NONE, "the cavity boundary is closed");
+                tet.set_nbr(f as usize, other);
+            }
+        }
+    }
+
     /// Undoes the stamps and locks of a failed insertion.
     fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
         if PAR {
@@ -667,15 +823,21 @@ impl Worker {
         self.stack.clear();
         self.locked.clear();
         self.locked.push(t);
-        self.stack.push(t);
+        // Each stack entry keeps the face it was entered through (4: none), which leads back
+        // into the cavity and needs no look.
+        self.stack.push((t, 4));
         sh.tets[t as usize].set_mark(in_cav);
-        while let Some(c) = self.stack.pop() {
+        while let Some((c, entry)) = self.stack.pop() {
             self.cavity.push(c);
             let cn = sh.tets[c as usize].nbrs();
             // Touch the four neighbours together so that their cache misses overlap.
             let first_touch =
                 cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.lock.load(Relaxed)));
-            for k in 0..4u8 {
+            // The other faces: three after the entry face, or all four of the first tet
+            // (a count instead of a skip, which would be a branch on the data).
+            let (first, count) = if entry == 4 { (0, 4) } else { (entry + 1, 3) };
+            for r in 0..count {
+                let k = (first + r) & 3;
                 let nb = cn[k as usize];
                 if nb == NONE {
                     self.boundary.push((c, k, NONE, 0));
@@ -694,18 +856,17 @@ impl Worker {
                 if mark == in_cav {
                     continue;
                 }
-                if mark != not_cav && sh.conflicts(nt.verts(), v) {
-                    nt.set_mark(in_cav);
-                    self.stack.push(nb);
-                } else {
-                    nt.set_mark(not_cav);
-                    let j = nt
-                        .nbrs()
-                        .iter()
-                        .position(|&x| x == c)
-                        .expect("adjacency is symmetric") as u8;
-                    self.boundary.push((c, k, nb, j));
-                }
+                let conflict = mark != not_cav && sh.conflicts(nt.verts(), v);
+                // From here on without a branch on `conflict` (in a cavity search it is true
+                // about as often as false): the mark is a select, the tet goes to the stack
+                // or to the boundary by a push that is kept or taken back.
+                nt.set_mark(if conflict { in_cav } else { not_cav });
+                let nn = nt.nbrs();
+                // The face of `nb` that looks back at `c` (adjacency is symmetric).
+                let j = (nn[1] == c) as u8 + 2 * (nn[2] == c) as u8 + 3 * (nn[3] == c) as u8;
+                debug_assert_eq!(nn[j as usize], c, "adjacency is symmetric");
+                push_if(&mut self.stack, (nb, j), conflict);
+                push_if(&mut self.boundary, (c, k, nb, j), !conflict);
             }
         }
         // Slots: the cavity's, then free ones, then fresh ones; all taken before any change.
@@ -760,27 +921,12 @@ impl Worker {
             sh.tets[c as usize].set_mark(DEAD);
             self.free.push(c);
         }
-        // Size the edge table (3 entries per new tet, load <= 1/2).
-        let need = (6 * self.new_tets.len()).next_power_of_two().max(256);
-        if self.table.len() < need {
-            self.table = vec![(0, 0, 0, 0); need];
-        }
-        self.generation = self.generation.wrapping_add(1);
-        if self.generation == 0 {
-            self.table.iter_mut().for_each(|e| e.3 = 0);
-            self.generation = 1;
-        }
-        let generation = self.generation;
-        // Hash into the first `need` slots only: the table may have grown for one big cavity,
-        // and spreading small cavities over all of it would miss the cache.
-        let mask = need - 1;
         for i in 0..self.new_tets.len() {
             let (tv, id, k) = self.new_tets[i];
             let (_, _, nb, j) = self.boundary[i];
             let tet = &sh.tets[id as usize];
             for q in 0..4 {
                 tet.v[q].store(tv[q], Relaxed);
-                tet.n[q].store(NONE, Relaxed);
             }
             tet.set_mark(NO_STAMP);
             tet.set_nbr(k as usize, nb);
@@ -793,26 +939,13 @@ impl Worker {
                 self.cavity.len(),
                 self.boundary.len()
             );
-            for &(f, i0, i1) in &LINK_FACES[k as usize] {
-                // The face opposite f contains v and the two vertices other than f and k.
-                let e = [tv[i0], tv[i1]];
-                let key = ((e[0].min(e[1]) as u64) << 32) | e[0].max(e[1]) as u64;
-                let mut h = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
-                loop {
-                    let slot = self.table[h];
-                    if slot.3 != generation {
-                        self.table[h] = (key, id, f, generation);
-                        break;
-                    }
-                    if slot.0 == key {
-                        let (_, a, fa, _) = slot;
-                        sh.tets[a as usize].set_nbr(fa as usize, id);
-                        tet.set_nbr(f as usize, a);
-                        break;
-                    }
-                    h = (h + 1) & mask;
-                }
-            }
+        }
+        // Link the new tets to each other. They all have `v` as apex over a boundary face,
+        // and the faces (ordered by `APEX_FACE`, `v` on their positive side) orient the
+        // cavity boundary consistently: two new tets are neighbours exactly where one face
+        // has the directed edge (x, y) and the other (y, x).
+        if !self.link_small(sh) {
+            self.link_hashed(sh);
         }
         self.last = self.new_tets[0].1;
         // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
@@ -867,6 +1000,7 @@ struct Builder {
     rank: Vec<u32>,
     n_real: u32,
     static_eps: f64,
+    static_orient_eps: f64,
     /// The tet arena, allocated zeroed (free slots); `tets[..used]` have been handed out.
     tets: Vec<Tet>,
     used: usize,
@@ -899,6 +1033,7 @@ impl Builder {
             .max(1.0);
         let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
         let static_eps = static_insphere_bound(extent);
+        let static_orient_eps = static_orient_bound(extent);
         let s = 1000.0 * r;
         pos.push([c[0] - s, c[1] - s, c[2] - s]);
         pos.push([c[0] + 3.0 * s, c[1] - s, c[2] - s]);
@@ -927,6 +1062,7 @@ impl Builder {
             rank,
             n_real,
             static_eps,
+            static_orient_eps,
             tets,
             used: 1,
         })
@@ -939,6 +1075,7 @@ impl Builder {
             tets: &self.tets[..self.used],
             n_real: self.n_real,
             static_eps: self.static_eps,
+            static_orient_eps: self.static_orient_eps,
             pool: None,
         }
     }

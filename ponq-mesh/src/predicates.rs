@@ -41,10 +41,29 @@ fn c3(p: &[f64; 3]) -> Coord3D<f64> {
 /// Shewchuk's adaptive exact predicate.
 #[inline]
 pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
+    orient3d_bounded(a, b, c, d, f64::INFINITY)
+}
+
+/// [`orient3d`] with a static error bound tried first: `static_eps` must be at least
+/// `8e-15 * D^3` where `D` bounds every coordinate difference of the four points (see
+/// [`static_orient_bound`]); `f64::INFINITY` disables it.
+#[inline]
+pub fn orient3d_bounded(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+    static_eps: f64,
+) -> i32 {
     let (bx, by, bz) = (b[0] - a[0], b[1] - a[1], b[2] - a[2]);
     let (cx, cy, cz) = (c[0] - a[0], c[1] - a[1], c[2] - a[2]);
     let (dx, dy, dz) = (d[0] - a[0], d[1] - a[1], d[2] - a[2]);
     let det = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+    // The decision as a value, so that a decided call costs no branch on its sign (the walk
+    // and the validity checks see both signs about equally often).
+    if (det > static_eps) | (det < -static_eps) {
+        return sign(det);
+    }
     let mx = fmax(fmax(bx.abs(), cx.abs()), dx.abs());
     let my = fmax(fmax(by.abs(), cy.abs()), dy.abs());
     let mz = fmax(fmax(bz.abs(), cz.abs()), dz.abs());
@@ -56,14 +75,30 @@ pub fn orient3d(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32 {
     // the same expression has 5.11e-15). 8e-15 leaves a margin.
     if lo > 1e-60 && hi < 1e60 {
         let eps = 8e-15 * mx * my * mz;
-        if det > eps {
-            return 1;
-        }
-        if det < -eps {
-            return -1;
+        if (det > eps) | (det < -eps) {
+            return sign(det);
         }
     }
     orient3d_exact(a, b, c, d)
+}
+
+/// `1` for a positive, `-1` for a negative number (called on decided, non-zero values only),
+/// without a branch.
+#[inline(always)]
+fn sign(x: f64) -> i32 {
+    (x > 0.0) as i32 - (x < 0.0) as i32
+}
+
+/// The static bound of [`orient3d_bounded`] for points whose coordinate differences are at
+/// most `extent`: the semi-static bound with every maximum replaced by `extent`.
+/// `f64::INFINITY` (no static filter) outside the range where the error analysis holds
+/// without underflow or overflow.
+pub fn static_orient_bound(extent: f64) -> f64 {
+    if extent > 1e-50 && extent < 1e60 {
+        8e-15 * extent.powi(3)
+    } else {
+        f64::INFINITY
+    }
 }
 
 #[cold]
@@ -129,11 +164,10 @@ pub fn insphere_bounded(
     // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
     // negative when e is inside the sphere of a positively oriented (a, b, c, d).
     let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
-    if det > static_eps {
-        return -1;
-    }
-    if det < -static_eps {
-        return 1;
+    // As in `orient3d_bounded`: the sign as a value (inside and outside are about equally
+    // frequent in a cavity search, so a branch on it would be mispredicted half the time).
+    if (det > static_eps) | (det < -static_eps) {
+        return -sign(det);
     }
     let mx = fmax(fmax(ax.abs(), bx.abs()), fmax(cx.abs(), dx.abs()));
     let my = fmax(fmax(ay.abs(), by.abs()), fmax(cy.abs(), dy.abs()));
@@ -148,11 +182,8 @@ pub fn insphere_bounded(
     // this determinant: 1.25e-13). 2e-13 leaves a margin.
     if lo > 1e-40 && hi < 1e40 {
         let eps = 2e-13 * mx * my * mz * hi * hi;
-        if det > eps {
-            return -1;
-        }
-        if det < -eps {
-            return 1;
+        if (det > eps) | (det < -eps) {
+            return -sign(det);
         }
     }
     insphere_exact(a, b, c, d, e)
@@ -363,6 +394,10 @@ mod tests {
             assert_eq!(
                 insphere_bounded(&p[0], &p[1], &p[2], &p[3], &p[4], bound),
                 exact
+            );
+            assert_eq!(
+                orient3d_bounded(&p[0], &p[1], &p[2], &p[3], static_orient_bound(2.0)),
+                orient3d_exact(&p[0], &p[1], &p[2], &p[3])
             );
         }
     }

@@ -133,7 +133,7 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
 /// [`insphere`] with a static error bound tried first: `static_eps` must be at least
 /// `2e-13 * D^5` where `D` bounds every coordinate difference of the five points (see
 /// [`static_insphere_bound`]); `f64::INFINITY` disables it.
-#[inline]
+#[inline(always)]
 pub fn insphere_bounded(
     a: &[f64; 3],
     b: &[f64; 3],
@@ -230,7 +230,7 @@ pub fn in_conflict(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32) -> bo
 
 /// [`in_conflict`] with the static filter of [`insphere_bounded`]; the global indices
 /// (`ids() = (it, ie)`) are only asked for when the exact test is a tie.
-#[inline]
+#[inline(always)]
 pub fn in_conflict_bounded(
     t: [&[f64; 3]; 4],
     ids: impl FnOnce() -> ([u32; 4], u32),

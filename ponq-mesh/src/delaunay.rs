@@ -69,6 +69,9 @@ pub struct DelaunayStats {
     /// Chunks of the parallel phase inserted by a worker other than their owner (one that
     /// had finished its own share).
     pub stolen_chunks: usize,
+    /// Insertions whose cavity boundary had too many vertices for the local-number map and
+    /// whose new tets were linked through the directed-edge hash table instead.
+    pub large_cavities: usize,
 }
 
 /// Options of [`Delaunay::with_options`].
@@ -505,6 +508,8 @@ struct Worker {
     deferred: Vec<u32>,
     /// Chunks this worker took from other workers' queues.
     stolen: usize,
+    /// Insertions linked by [`Worker::link_hashed`].
+    large_cavities: usize,
     /// Testing aid: every `n`-th lock attempt fails (0: never).
     fail_every: u32,
     lock_attempts: u32,
@@ -541,6 +546,7 @@ impl Worker {
             last: 0,
             deferred: Vec::new(),
             stolen: 0,
+            large_cavities: 0,
             fail_every: 0,
             lock_attempts: 0,
             rng: SplitMix(seed),
@@ -954,6 +960,7 @@ impl Worker {
         // has the directed edge (x, y) and the other (y, x).
         if !self.link_small(sh) {
             self.link_hashed(sh);
+            self.large_cavities += 1;
         }
         self.last = self.new_tets[0].1;
         // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
@@ -1140,6 +1147,7 @@ impl Builder {
             self.insert_sequential(&mut main, 0..self.n_real);
             return self.finish(DelaunayStats {
                 workers: 1,
+                large_cavities: main.large_cavities,
                 ..Default::default()
             });
         }
@@ -1272,13 +1280,16 @@ impl Builder {
                 .unwrap_or(0);
         }
         deferred.sort_unstable();
-        let stats = DelaunayStats {
+        let mut stats = DelaunayStats {
             workers: threads,
             parallel_insertions,
             deferred: deferred.len(),
             stolen_chunks: workers.iter().map(|w| w.stolen).sum(),
+            large_cavities: 0,
         };
         self.insert_sequential(&mut main, deferred);
+        stats.large_cavities =
+            main.large_cavities + workers.iter().map(|w| w.large_cavities).sum::<usize>();
         self.finish(stats)
     }
 

@@ -22,6 +22,34 @@ fn back_index(dt: &Delaunay, t: usize, nb: u32) -> usize {
 }
 
 /// Structural checks; returns the total volume.
+/// A cavity too large for the local-number map (more than 32 boundary vertices) is linked
+/// through the directed-edge table: the centre of many co-spherical points conflicts with
+/// every tet made before it, so its cavity is everything inserted so far.
+#[test]
+fn large_cavities_are_linked_too() {
+    let mut pts = Vec::new();
+    let n = 600;
+    for i in 0..n {
+        // A Fibonacci sphere: well spread, all at distance 1 from the centre (up to rounding;
+        // exact co-sphericity is not needed, only that the centre is inside every sphere).
+        let z = 1.0 - (2 * i + 1) as f64 / n as f64;
+        let r = (1.0 - z * z).sqrt();
+        let a = i as f64 * 2.399_963_229_728_653;
+        pts.push([r * a.cos(), r * a.sin(), z]);
+    }
+    pts.push([0.0, 0.0, 0.0]);
+    for threads in [1, 2] {
+        let dt = Delaunay::with_threads(&pts, threads).unwrap();
+        assert!(
+            dt.stats.large_cavities >= 1,
+            "no large cavity: {:?}",
+            dt.stats
+        );
+        check_structure(&dt);
+        check_empty_spheres(&dt);
+    }
+}
+
 fn check_structure(dt: &Delaunay) -> f64 {
     let p = |v: u32| &dt.vertices[v as usize];
     let mut vol = 0.0;

@@ -370,26 +370,16 @@ const NO_STAMP: u32 = 1;
 /// `0..4`, so for a positively oriented tet `orient3d(face..., t[k]) > 0`).
 const APEX_FACE: [[usize; 3]; 4] = [[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]];
 
-/// `APEX_EDGES[k]`: for a new tet with the new vertex at position `k`, the three directed
-/// edges `(x, y)` of its boundary face (ordered by [`APEX_FACE`]), each with the face `f`
-/// (the position of the face's third vertex) that the tet shares with the new tet across
-/// that edge.
-const APEX_EDGES: [[(usize, usize, u8); 3]; 4] = {
-    let mut t = [[(0usize, 0usize, 0u8); 3]; 4];
-    let mut k = 0;
-    while k < 4 {
-        let [a, b, c] = APEX_FACE[k];
-        t[k] = [(a, b, c as u8), (b, c, a as u8), (c, a, b as u8)];
-        k += 1;
-    }
-    t
-};
+/// The three directed edges `(i, j)` of a boundary face, as indices into its
+/// [`APEX_FACE`] order, each with the index of the face's third vertex: a new tet shares with
+/// the new tet across edge `(i, j)` its face opposite `APEX_FACE[k][third]`.
+const FACE_EDGES: [(usize, usize, usize); 3] = [(0, 1, 2), (1, 2, 0), (2, 0, 1)];
 
 /// Cavities whose boundary has at most this many vertices are linked by
 /// [`Worker::link_small`] (a Delaunay cavity in 3D has about 16 on average).
 const SMALL_CAVITY: usize = 32;
 
-/// A slot of a worker's directed-edge table (see [`Worker::insert`]).
+/// A slot of a worker's directed-edge table (see [`Worker::link_hashed`]).
 #[derive(Debug, Clone, Copy, Default)]
 struct EdgeSlot {
     key: u64,
@@ -732,18 +722,16 @@ impl Worker {
         let map = &mut self.edge_map;
         for (&(_, id, _), l) in self.new_tets.iter().zip(&self.face_ids) {
             let l = l.map(|x| x as usize);
-            map[l[0] * L + l[1]] = id;
-            map[l[1] * L + l[2]] = id;
-            map[l[2] * L + l[0]] = id;
+            for (i, j, _) in FACE_EDGES {
+                map[l[i] * L + l[j]] = id;
+            }
         }
         for (&(_, id, k), l) in self.new_tets.iter().zip(&self.face_ids) {
             let l = l.map(|x| x as usize);
-            let [a, b, c] = APEX_FACE[k as usize];
             let tet = &sh.tets[id as usize];
-            // Across edge (l0, l1) lies the face opposite the face's third vertex, and so on.
-            tet.set_nbr(c, map[l[1] * L + l[0]]);
-            tet.set_nbr(a, map[l[2] * L + l[1]]);
-            tet.set_nbr(b, map[l[0] * L + l[2]]);
+            for (i, j, third) in FACE_EDGES {
+                tet.set_nbr(APEX_FACE[k as usize][third], map[l[j] * L + l[i]]);
+            }
         }
         true
     }
@@ -769,8 +757,9 @@ impl Worker {
         let mask = (1usize << bits) - 1;
         let slot_of = |key: u64| (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - bits)) as usize;
         for &(tv, id, k) in &self.new_tets {
-            for &(x, y, _) in &APEX_EDGES[k as usize] {
-                let key = edge_key(tv[x], tv[y]);
+            let face = APEX_FACE[k as usize].map(|p| tv[p]);
+            for (i, j, _) in FACE_EDGES {
+                let key = edge_key(face[i], face[j]);
                 let mut h = slot_of(key);
                 while self.table[h].generation == generation {
                     h = (h + 1) & mask;
@@ -784,8 +773,9 @@ impl Worker {
         }
         for &(tv, id, k) in &self.new_tets {
             let tet = &sh.tets[id as usize];
-            for &(x, y, f) in &APEX_EDGES[k as usize] {
-                let key = edge_key(tv[y], tv[x]);
+            let face = APEX_FACE[k as usize].map(|p| tv[p]);
+            for (i, j, third) in FACE_EDGES {
+                let key = edge_key(face[j], face[i]);
                 let mut h = slot_of(key);
                 let mut other = NONE;
                 loop {
@@ -800,7 +790,7 @@ impl Worker {
                     h = (h + 1) & mask;
                 }
                 debug_assert_ne!(other, NONE, "the cavity boundary is closed");
-                tet.set_nbr(f as usize, other);
+                tet.set_nbr(APEX_FACE[k as usize][third], other);
             }
         }
     }

@@ -46,15 +46,15 @@ fn shape(n_samples: usize) -> Samples {
     s
 }
 
-fn row(name: &str, ponq: &Ponq, grid: f64) {
+fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize) {
     let opts = MeshingOptions {
         grid_scale: grid,
         ..Default::default()
     };
-    // Warm-up run, then the best of 3.
+    // Warm-up run, then the best of `repeat` (3 unless `--repeat N`).
     let _ = mesh_ponq(ponq, &opts);
     let mut best = None;
-    for _ in 0..3 {
+    for _ in 0..repeat {
         let t = Instant::now();
         let out = mesh_ponq(ponq, &opts).expect("meshing");
         let wall = t.elapsed();
@@ -69,14 +69,16 @@ fn row(name: &str, ponq: &Ponq, grid: f64) {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let s = &out.stats;
     println!(
-        "| {name} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {} / {} | {} | {:.1} |",
+        "| {name} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {} / {} | {} | {:.1} |",
         s.points,
         s.tets,
+        ms(s.times.prepare),
         ms(s.times.delaunay),
         ms(s.times.tagging),
         ms(s.times.cut),
         ms(s.times.manifold),
-        ms(s.times.prepare + s.times.extraction),
+        ms(s.times.extraction),
+        ms(s.times.flips),
         ms(wall),
         out.mesh.vertices.len(),
         out.mesh.faces.len(),
@@ -86,20 +88,49 @@ fn row(name: &str, ponq: &Ponq, grid: f64) {
 }
 
 fn main() {
+    // `--grid G` (repeatable) keeps only those synthetic grids, `--repeat N` times each: a
+    // run for a profiler that is mostly meshing.
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let value_of = |flag: &str| {
+        args.windows(2)
+            .filter(|w| w[0] == flag)
+            .map(|w| w[1].parse::<usize>().expect("a number after the flag"))
+            .collect::<Vec<_>>()
+    };
+    let only = value_of("--grid");
+    // `--save DIR`: also write each synthetic PoNQ as `DIR/synthetic_G.npz` (for `ponq-mesh`
+    // of another build, `--grid-scale G`).
+    let save = args
+        .windows(2)
+        .find(|w| w[0] == "--save")
+        .map(|w| std::path::PathBuf::from(&w[1]));
+    let repeat = value_of("--repeat").last().copied().unwrap_or(3).max(1);
     println!(
-        "| input | points | tets | delaunay ms | tagging ms | cut ms | manifold ms | other ms | total ms | V / F | valid | check ms |"
+        "| input | points | tets | prepare ms | delaunay ms | tagging ms | cut ms | manifold ms | extraction ms | flips ms | total ms | V / F | valid | check ms |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
     for (grid, samples) in [
         (32usize, 80_000usize),
         (72, 300_000),
         (145, 1_000_000),
         (230, 2_500_000),
     ] {
+        if !only.is_empty() && !only.contains(&grid) {
+            continue;
+        }
         let ponq = ponq_by_grid(&shape(samples), grid);
-        row(&format!("synthetic grid {grid}"), &ponq, grid as f64);
+        if let Some(dir) = &save {
+            let path = dir.join(format!("synthetic_{grid}.npz"));
+            io::npz::write_ponq(&path, &ponq).expect("writing the PoNQ");
+        }
+        row(
+            &format!("synthetic grid {grid}"),
+            &ponq,
+            grid as f64,
+            repeat,
+        );
     }
-    for arg in std::env::args().skip(1).filter(|a| a.ends_with(".npz")) {
+    for arg in args.iter().filter(|a| a.ends_with(".npz")) {
         let grid = if arg.contains("_128") {
             128.0
         } else if arg.contains("_64") {
@@ -107,8 +138,8 @@ fn main() {
         } else {
             32.0
         };
-        match io::npz::read_ponq(&arg) {
-            Ok(p) => row(&arg, &p, grid),
+        match io::npz::read_ponq(arg) {
+            Ok(p) => row(arg, &p, grid, repeat),
             Err(e) => eprintln!("{arg}: {e}"),
         }
     }

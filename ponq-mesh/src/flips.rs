@@ -19,11 +19,14 @@
 //! closed, oriented and a 2-manifold; afterwards the exact self-intersection test runs, and if
 //! any flipped triangle intersects another one, all flips are undone and the pass is redone
 //! without the quadrilaterals involved (and, as a last resort, the surface is left as it was).
-//! The pass is sequential and deterministic.
+//! The pass is sequential and deterministic (its candidate test runs in parallel). It works on
+//! [`HalfEdges`]: the input must be a closed, oriented 2-manifold (what the mesher's manifold
+//! repair makes); any other input is left as it is.
 
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::TriMesh;
+use crate::halfedge::HalfEdges;
 use crate::quadric::Quadric;
 use crate::score::NORMAL_SCALE;
 use crate::validity::intersecting_face_pairs_among;
@@ -108,34 +111,6 @@ fn key(a: u32, b: u32) -> (u32, u32) {
     (a.min(b), a.max(b))
 }
 
-/// The faces of one undirected edge: the first two, and how many there are (two on a closed
-/// manifold surface; any other count leaves the edge alone).
-#[derive(Debug, Clone, Copy)]
-struct EdgeFaces {
-    faces: [u32; 2],
-    count: u32,
-}
-
-/// Faces of every undirected edge. A fast (Fx) hash: the keys are vertex pairs of our own
-/// mesh, not adversarial input, and the map is probed a few times per edge and pass.
-fn edge_faces(mesh: &TriMesh) -> FxHashMap<(u32, u32), EdgeFaces> {
-    let mut m: FxHashMap<(u32, u32), EdgeFaces> =
-        FxHashMap::with_capacity_and_hasher(mesh.faces.len() * 3 / 2, Default::default());
-    for (fi, f) in mesh.faces.iter().enumerate() {
-        for k in 0..3 {
-            let e = m.entry(key(f[k], f[(k + 1) % 3])).or_insert(EdgeFaces {
-                faces: [u32::MAX; 2],
-                count: 0,
-            });
-            if e.count < 2 {
-                e.faces[e.count as usize] = fi as u32;
-            }
-            e.count += 1;
-        }
-    }
-    m
-}
-
 /// The face rotated so that it starts with `u` (it must contain `u`).
 fn starting_at(f: [u32; 3], u: u32) -> [u32; 3] {
     if f[0] == u {
@@ -147,25 +122,74 @@ fn starting_at(f: [u32; 3], u: u32) -> [u32; 3] {
     }
 }
 
-/// What a flip pass keeps up to date: the faces of every edge and the vertex degrees.
+/// The quadric test of a flip of `u v` to `a b`: the four vertices' quadrics at the new
+/// diagonal's midpoint must give less than [`QUADRIC_FACTOR`] of their error at the old one's,
+/// and the old error must be above `noise`.
+fn quadric_test(mesh: &TriMesh, quadrics: &[Quadric], noise: f64, [u, v, a, b]: [u32; 4]) -> bool {
+    let mid = |x: u32, y: u32| {
+        let (p, q) = (mesh.vertices[x as usize], mesh.vertices[y as usize]);
+        [
+            0.5 * (p[0] + q[0]),
+            0.5 * (p[1] + q[1]),
+            0.5 * (p[2] + q[2]),
+        ]
+    };
+    let err = |m: [f64; 3]| -> f64 {
+        [u, v, a, b]
+            .iter()
+            .map(|&w| quadrics[w as usize].eval(m).max(0.0))
+            .sum()
+    };
+    let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
+    e_new < QUADRIC_FACTOR * e_old && e_old > noise
+}
+
+/// Whether replacing `f1 = (u, v, a)`, `f2 = (v, u, b)` by `(b, v, a)`, `(a, u, b)` lowers the
+/// summed face score by more than [`MIN_GAIN`] (relative); false if a face is degenerate.
+fn lowers_score(
+    mesh: &TriMesh,
+    quadrics: &[Quadric],
+    normals: &[[f64; 3]],
+    h: f64,
+    f1: [u32; 3],
+    f2: [u32; 3],
+) -> bool {
+    let [u, v, a] = f1;
+    let b = f2[2];
+    let sc = |f| score(mesh, quadrics, normals, h, f);
+    let (Some(s1), Some(s2), Some(t1), Some(t2)) = (sc(f1), sc(f2), sc([b, v, a]), sc([a, u, b]))
+    else {
+        return false;
+    };
+    let (before, after) = (s1.0 + s2.0 + s1.1 + s2.1, t1.0 + t2.0 + t1.1 + t2.1);
+    after < before - MIN_GAIN * before.abs()
+}
+
+/// Quadric errors below (1% of a cell)^2 per vertex are noise (the quadrics are normalised:
+/// they measure squared distances).
+fn noise_level(h: f64) -> f64 {
+    4.0 * (0.01f64).powi(2) / h.max(1e-30)
+}
+
+/// What a flip pass keeps up to date: the half-edges (faces of every edge) and the vertex
+/// degrees.
 struct FlipState<'a> {
     quadrics: &'a [Quadric],
     normals: &'a [[f64; 3]],
     h: f64,
     banned: &'a FxHashSet<(u32, u32)>,
-    edges: FxHashMap<(u32, u32), EdgeFaces>,
-    degree: Vec<u32>,
+    he: HalfEdges,
     /// Quadric errors below this are noise.
     noise: f64,
 }
 
-/// The two faces of an edge `u v`: `f1 = (u, v, a)` at index `i1`, `f2 = (v, u, b)` at `i2`.
+/// The two faces of an edge `u v`: `f1 = (u, v, a)` at index `i1` (holding the half-edge
+/// `h1 = u -> v`), `f2 = (v, u, b)` at `i2`.
 #[derive(Debug, Clone, Copy)]
 struct Quad {
     f1: [u32; 3],
     f2: [u32; 3],
-    i1: usize,
-    i2: usize,
+    h1: u32,
 }
 
 /// A flip made: the two faces (now `(b, v, a)` and `(a, u, b)`) and the four vertices.
@@ -179,149 +203,89 @@ struct Flip {
 }
 
 impl<'a> FlipState<'a> {
+    /// `None` unless `mesh` is a closed, oriented 2-manifold.
     fn new(
         mesh: &TriMesh,
         quadrics: &'a [Quadric],
         normals: &'a [[f64; 3]],
         h: f64,
         banned: &'a FxHashSet<(u32, u32)>,
-    ) -> Self {
-        let edges = edge_faces(mesh);
-        let mut degree = vec![0u32; mesh.vertices.len()];
-        for (&(a, b), fs) in &edges {
-            if fs.count == 2 {
-                degree[a as usize] += 1;
-                degree[b as usize] += 1;
-            }
-        }
-        Self {
+    ) -> Option<Self> {
+        let he = HalfEdges::new(&mesh.faces, mesh.vertices.len())?;
+        Some(Self {
             quadrics,
             normals,
             h,
             banned,
-            edges,
-            degree,
-            // Quadric errors below (1% of a cell)^2 per vertex are noise (the quadrics are
-            // normalised: they measure squared distances).
-            noise: 4.0 * (0.01f64).powi(2) / h.max(1e-30),
-        }
+            he,
+            noise: noise_level(h),
+        })
     }
 
     /// False when [`FlipState::try_flip`] would certainly reject `e` whatever the degrees
-    /// and the other edges are: a banned or non-manifold edge, inconsistent orientation, or
-    /// a failed quadric test. It depends on the faces of `e` only (and on static data), so it
-    /// holds until a flip changes those faces. Read-only: run on many edges in parallel.
+    /// and the other edges are: a banned edge, or a failed quadric test. It depends on the
+    /// faces of `e` only (and on static data), so it holds until a flip changes those faces.
+    /// Read-only: run on many edges in parallel.
     fn may_flip(&self, mesh: &TriMesh, e: (u32, u32)) -> bool {
-        let Some(q) = self.quad(mesh, e) else {
+        if !self.banned.is_empty() && self.banned.contains(&e) {
             return false;
-        };
-        let (u, v) = e;
-        let (a, b) = (q.f1[2], q.f2[2]);
-        a != b && self.quadric_test(mesh, [u, v, a, b])
+        }
+        self.he
+            .find(&mesh.faces, e.0, e.1)
+            .is_some_and(|h| self.may_flip_at(mesh, h))
     }
 
-    /// The two faces of the edge `e = (u, v)` as `f1 = (u, v, a)` and `f2 = (v, u, b)`
-    /// with their indices, or `None` for a banned edge, an edge without exactly two faces or
-    /// faces that do not hold it in opposite directions.
+    /// [`FlipState::may_flip`] of the edge of the half-edge `h = u -> v`, banned edges aside.
+    fn may_flip_at(&self, mesh: &TriMesh, h: u32) -> bool {
+        let faces = &mesh.faces;
+        let next = |x: u32| x - x % 3 + (x % 3 + 1) % 3;
+        let (u, v) = (HalfEdges::origin(faces, h), HalfEdges::target(faces, h));
+        let a = HalfEdges::target(faces, next(h));
+        let b = HalfEdges::target(faces, next(self.he.opposite(h)));
+        a != b && quadric_test(mesh, self.quadrics, self.noise, [u, v, a, b])
+    }
+
+    /// The two faces of the edge `e = (u, v)` as `f1 = (u, v, a)` and `f2 = (v, u, b)`, or
+    /// `None` for a banned edge or one that is not (or no longer) in the mesh.
     fn quad(&self, mesh: &TriMesh, e: (u32, u32)) -> Option<Quad> {
-        if self.banned.contains(&e) {
+        if !self.banned.is_empty() && self.banned.contains(&e) {
             return None;
         }
-        let fs = self.edges.get(&e)?;
-        if fs.count != 2 {
-            return None;
-        }
-        let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
         let (u, v) = e;
-        let (mut f1, mut f2) = (
-            starting_at(mesh.faces[fa], u),
-            starting_at(mesh.faces[fb], v),
-        );
-        let (mut i1, mut i2) = (fa, fb);
-        if f1[1] != v {
-            f1 = starting_at(mesh.faces[fb], u);
-            f2 = starting_at(mesh.faces[fa], v);
-            (i1, i2) = (fb, fa);
-        }
-        (f1[1] == v && f2[1] == u).then_some(Quad { f1, f2, i1, i2 })
-    }
-
-    /// The quadric test of a flip of `u v` to `a b` (see [`FlipState::try_flip`]).
-    fn quadric_test(&self, mesh: &TriMesh, [u, v, a, b]: [u32; 4]) -> bool {
-        let mid = |x: u32, y: u32| {
-            let (p, q) = (mesh.vertices[x as usize], mesh.vertices[y as usize]);
-            [
-                0.5 * (p[0] + q[0]),
-                0.5 * (p[1] + q[1]),
-                0.5 * (p[2] + q[2]),
-            ]
-        };
-        let err = |m: [f64; 3]| -> f64 {
-            [u, v, a, b]
-                .iter()
-                .map(|&w| self.quadrics[w as usize].eval(m).max(0.0))
-                .sum()
-        };
-        let (e_old, e_new) = (err(mid(u, v)), err(mid(a, b)));
-        e_new < QUADRIC_FACTOR * e_old && e_old > self.noise
+        let h1 = self.he.find(&mesh.faces, u, v)?;
+        let h2 = self.he.opposite(h1);
+        Some(Quad {
+            f1: starting_at(mesh.faces[(h1 / 3) as usize], u),
+            f2: starting_at(mesh.faces[(h2 / 3) as usize], v),
+            h1,
+        })
     }
 
     /// Flips edge `e` if that improves the mesh (see the [module docs](self)).
     fn try_flip(&mut self, mesh: &mut TriMesh, e: (u32, u32)) -> Option<Flip> {
-        let (quadrics, normals, h) = (self.quadrics, self.normals, self.h);
-        let Quad { f1, f2, i1, i2 } = self.quad(mesh, e)?;
+        let Quad { f1, f2, h1 } = self.quad(mesh, e)?;
         let (u, v) = e;
         let (a, b) = (f1[2], f2[2]);
-        if a == b || self.degree[u as usize] <= 3 || self.degree[v as usize] <= 3 {
+        if a == b || self.he.degree(u) <= 3 || self.he.degree(v) <= 3 {
             return None;
         }
-        let (g1, g2) = ([b, v, a], [a, u, b]);
         // A flip must at least halve the quadric error of the diagonal (the four vertices'
         // quadrics at its midpoint: zero on a crease line, positive on a diagonal that cuts
         // across it), by more than noise, and lower the whole face score. The quadric test
         // comes first: it is cheap and rejects almost every edge (flat regions), so the face
         // scores (three `acos` each) are computed for the few candidates only.
-        // The new edge must not exist (a hash probe: after the quadric test, which rejects
-        // most edges).
-        if !self.quadric_test(mesh, [u, v, a, b]) || self.edges.contains_key(&key(a, b)) {
+        // The new edge must not exist (a walk around `a`: after the quadric test, which
+        // rejects most edges).
+        if !quadric_test(mesh, self.quadrics, self.noise, [u, v, a, b])
+            || self.he.find(&mesh.faces, a, b).is_some()
+            || !lowers_score(mesh, self.quadrics, self.normals, self.h, f1, f2)
+        {
             return None;
         }
-        let s1 = score(mesh, quadrics, normals, h, f1)?;
-        let s2 = score(mesh, quadrics, normals, h, f2)?;
-        let t1 = score(mesh, quadrics, normals, h, g1)?;
-        let t2 = score(mesh, quadrics, normals, h, g2)?;
-        let (before, after) = (s1.0 + s2.0 + s1.1 + s2.1, t1.0 + t2.0 + t1.1 + t2.1);
-        if !(after < before - MIN_GAIN * before.abs()) {
-            return None;
-        }
-        // Flip: update faces, edge map and degrees.
-        mesh.faces[i1] = g1;
-        mesh.faces[i2] = g2;
-        self.edges.remove(&e);
-        self.edges.insert(
-            key(a, b),
-            EdgeFaces {
-                faces: [i1 as u32, i2 as u32],
-                count: 2,
-            },
-        );
-        // The four outer edges change faces: v-a and b-v are in g1, a-u and u-b in g2.
-        for (x, y, fnew) in [(v, a, i1), (b, v, i1), (a, u, i2), (u, b, i2)] {
-            if let Some(list) = self.edges.get_mut(&key(x, y)) {
-                let n = (list.count as usize).min(2);
-                for f in list.faces[..n].iter_mut() {
-                    if *f as usize == i1 || *f as usize == i2 {
-                        *f = fnew as u32;
-                    }
-                }
-            }
-        }
-        self.degree[u as usize] -= 1;
-        self.degree[v as usize] -= 1;
-        self.degree[a as usize] += 1;
-        self.degree[b as usize] += 1;
+        let i2 = (self.he.opposite(h1) / 3) as usize;
+        self.he.flip(&mut mesh.faces, h1);
         Some(Flip {
-            faces: (i1, i2),
+            faces: ((h1 / 3) as usize, i2),
             u,
             v,
             a,
@@ -334,7 +298,7 @@ impl<'a> FlipState<'a> {
 /// Returns the flipped face pairs.
 ///
 /// The result is that of passes over all edges in sorted order until a pass flips nothing
-/// ([`flip_pass_sweeps`], kept as the reference in the tests), computed with work lists: an
+/// (`reference::flip_pass_sweeps`, in the tests), computed with work lists: an
 /// edge whose surroundings did not change since it was last rejected is rejected again, so a
 /// pass after the first looks only at the edges next to the flips (the edges of the faces
 /// around the four vertices of each flip: every edge whose faces, end degrees or opposite
@@ -349,16 +313,22 @@ fn flip_pass(
     banned: &FxHashSet<(u32, u32)>,
     stats: &mut FlipStats,
 ) -> Vec<(u32, u32)> {
-    let mut st = FlipState::new(mesh, quadrics, normals, h, banned);
-    let mut vfaces: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertices.len()];
-    for (fi, f) in mesh.faces.iter().enumerate() {
-        for &v in f {
-            vfaces[v as usize].push(fi as u32);
-        }
-    }
+    let Some(mut st) = FlipState::new(mesh, quadrics, normals, h, banned) else {
+        return Vec::new();
+    };
     let mut flipped = Vec::new();
-    let mut base: Vec<(u32, u32)> = st.edges.keys().copied().collect();
-    base.sort_unstable();
+    // The first pass: every edge, with its half-edge.
+    let first: Vec<u32> = st.he.sorted_edges(&mesh.faces);
+    let mut base: Vec<(u32, u32)> = first
+        .iter()
+        .map(|&h| {
+            (
+                HalfEdges::origin(&mesh.faces, h),
+                HalfEdges::target(&mesh.faces, h),
+            )
+        })
+        .collect();
+    let mut first = Some(first);
     stats.passes = 0;
     for _ in 0..MAX_PASSES {
         stats.passes += 1;
@@ -371,14 +341,18 @@ fn flip_pass(
         let mut first_change: FxHashMap<(u32, u32), bool> = FxHashMap::default();
         // Which edges of `base` may flip at all, decided in parallel on the faces as they are
         // at the start of the pass (most edges fail the quadric test). An edge whose faces a
-        // flip changes later in the pass is put in `extra` (and `touched`) and tried fully.
+        // flip changes later in the pass is put in `extra` and tried fully.
         let may: Vec<bool> = {
             use rayon::prelude::*;
             let st = &st;
             let mesh = &*mesh;
-            base.par_iter().map(|&e| st.may_flip(mesh, e)).collect()
+            match first.take() {
+                Some(hs) if st.banned.is_empty() => {
+                    hs.par_iter().map(|&h| st.may_flip_at(mesh, h)).collect()
+                }
+                _ => base.par_iter().map(|&e| st.may_flip(mesh, e)).collect(),
+            }
         };
-        let mut touched: FxHashSet<(u32, u32)> = FxHashSet::default();
         let mut i = 0;
         let mut last: Option<(u32, u32)> = None;
         loop {
@@ -392,13 +366,15 @@ fn flip_pass(
                 (None, None) => (None, None),
             };
             let Some(e) = e else { break };
+            if from_base.is_some_and(|k| !may[k]) {
+                // Its faces were as they are now when the pass started (it cannot flip), or
+                // a flip changed them and put it in `extra`, where it comes next.
+                continue;
+            }
             if last == Some(e) {
                 continue; // in both lists
             }
             last = Some(e);
-            if from_base.is_some_and(|k| !may[k]) && !touched.contains(&e) {
-                continue; // its faces are as at the start of the pass: it cannot flip
-            }
             let Some(f) = st.try_flip(mesh, e) else {
                 continue;
             };
@@ -406,21 +382,16 @@ fn flip_pass(
             flipped.push((f.faces.0 as u32, f.faces.1 as u32));
             first_change.entry(e).or_insert(true);
             first_change.entry(key(f.a, f.b)).or_insert(false);
-            // Face i1 lost u and gained b, face i2 lost v and gained a.
-            let (i1, i2) = (f.faces.0 as u32, f.faces.1 as u32);
-            vfaces[f.u as usize].retain(|&x| x != i1);
-            vfaces[f.v as usize].retain(|&x| x != i2);
-            vfaces[f.a as usize].push(i2);
-            vfaces[f.b as usize].push(i1);
+            // The edges of the faces around the four vertices (in any order: what follows
+            // goes into sets and a list sorted later).
             for w in [f.u, f.v, f.a, f.b] {
-                for &fi in &vfaces[w as usize] {
-                    let t = mesh.faces[fi as usize];
+                for hw in st.he.outgoing(&mesh.faces, w) {
+                    let t = mesh.faces[(hw / 3) as usize];
                     for k in 0..3 {
                         let d = key(t[k], t[(k + 1) % 3]);
                         let existed_at_start = first_change.get(&d).copied().unwrap_or(true);
                         if d > e && existed_at_start {
                             extra.insert(d);
-                            touched.insert(d);
                         } else {
                             next.push(d);
                         }
@@ -438,37 +409,135 @@ fn flip_pass(
     flipped
 }
 
-/// [`flip_pass`] as plain sweeps over all edges (the reference its tests compare with).
+/// The reference [`flip_pass`] is tested against: plain sweeps over all edges in sorted order
+/// until one flips nothing, on its own bookkeeping (a hash map from each edge to its faces,
+/// the first version of this module) rather than on half-edges.
 #[cfg(test)]
-fn flip_pass_sweeps(
-    mesh: &mut TriMesh,
-    quadrics: &[Quadric],
-    normals: &[[f64; 3]],
-    h: f64,
-    banned: &FxHashSet<(u32, u32)>,
-    stats: &mut FlipStats,
-) -> Vec<(u32, u32)> {
-    let mut st = FlipState::new(mesh, quadrics, normals, h, banned);
-    let mut flipped = Vec::new();
-    stats.passes = 0;
-    for _ in 0..MAX_PASSES {
-        stats.passes += 1;
-        let mut keys: Vec<(u32, u32)> = st.edges.keys().copied().collect();
-        keys.sort_unstable();
-        let before = flipped.len();
-        for e in keys {
-            if let Some(f) = st.try_flip(mesh, e) {
-                flipped.push((f.faces.0 as u32, f.faces.1 as u32));
+mod reference {
+    use super::*;
+    use rustc_hash::FxHashMap;
+
+    /// The faces of one undirected edge: the first two, and how many there are.
+    #[derive(Debug, Clone, Copy)]
+    pub struct EdgeFaces {
+        faces: [u32; 2],
+        count: u32,
+    }
+
+    /// Faces of every undirected edge.
+    pub fn edge_faces(mesh: &TriMesh) -> FxHashMap<(u32, u32), EdgeFaces> {
+        let mut m: FxHashMap<(u32, u32), EdgeFaces> = FxHashMap::default();
+        for (fi, f) in mesh.faces.iter().enumerate() {
+            for k in 0..3 {
+                let e = m.entry(key(f[k], f[(k + 1) % 3])).or_insert(EdgeFaces {
+                    faces: [u32::MAX; 2],
+                    count: 0,
+                });
+                if e.count < 2 {
+                    e.faces[e.count as usize] = fi as u32;
+                }
+                e.count += 1;
             }
         }
-        if flipped.len() == before {
-            break;
-        }
+        m
     }
-    flipped
+
+    /// Sweeps of greedy improving flips, skipping the edges in `banned`.
+    pub fn flip_pass_sweeps(
+        mesh: &mut TriMesh,
+        quadrics: &[Quadric],
+        normals: &[[f64; 3]],
+        h: f64,
+        banned: &FxHashSet<(u32, u32)>,
+        stats: &mut FlipStats,
+    ) -> Vec<(u32, u32)> {
+        let mut edges = edge_faces(mesh);
+        let mut degree = vec![0u32; mesh.vertices.len()];
+        for (&(a, b), fs) in &edges {
+            if fs.count == 2 {
+                degree[a as usize] += 1;
+                degree[b as usize] += 1;
+            }
+        }
+        let noise = noise_level(h);
+        let mut flipped = Vec::new();
+        stats.passes = 0;
+        for _ in 0..MAX_PASSES {
+            stats.passes += 1;
+            let mut keys: Vec<(u32, u32)> = edges.keys().copied().collect();
+            keys.sort_unstable();
+            let before = flipped.len();
+            for e in keys {
+                if banned.contains(&e) {
+                    continue;
+                }
+                let Some(fs) = edges.get(&e).copied() else {
+                    continue;
+                };
+                if fs.count != 2 {
+                    continue;
+                }
+                let (fa, fb) = (fs.faces[0] as usize, fs.faces[1] as usize);
+                let (u, v) = e;
+                let (mut f1, mut f2) = (
+                    starting_at(mesh.faces[fa], u),
+                    starting_at(mesh.faces[fb], v),
+                );
+                let (mut i1, mut i2) = (fa, fb);
+                if f1[1] != v {
+                    f1 = starting_at(mesh.faces[fb], u);
+                    f2 = starting_at(mesh.faces[fa], v);
+                    (i1, i2) = (fb, fa);
+                }
+                if !(f1[1] == v && f2[1] == u) {
+                    continue;
+                }
+                let (a, b) = (f1[2], f2[2]);
+                if a == b
+                    || degree[u as usize] <= 3
+                    || degree[v as usize] <= 3
+                    || !quadric_test(mesh, quadrics, noise, [u, v, a, b])
+                    || edges.contains_key(&key(a, b))
+                    || !lowers_score(mesh, quadrics, normals, h, f1, f2)
+                {
+                    continue;
+                }
+                mesh.faces[i1] = [b, v, a];
+                mesh.faces[i2] = [a, u, b];
+                edges.remove(&e);
+                edges.insert(
+                    key(a, b),
+                    EdgeFaces {
+                        faces: [i1 as u32, i2 as u32],
+                        count: 2,
+                    },
+                );
+                for (x, y, fnew) in [(v, a, i1), (b, v, i1), (a, u, i2), (u, b, i2)] {
+                    if let Some(list) = edges.get_mut(&key(x, y)) {
+                        let n = (list.count as usize).min(2);
+                        for f in list.faces[..n].iter_mut() {
+                            if *f as usize == i1 || *f as usize == i2 {
+                                *f = fnew as u32;
+                            }
+                        }
+                    }
+                }
+                degree[u as usize] -= 1;
+                degree[v as usize] -= 1;
+                degree[a as usize] += 1;
+                degree[b as usize] += 1;
+                flipped.push((i1 as u32, i2 as u32));
+            }
+            if flipped.len() == before {
+                break;
+            }
+        }
+        flipped
+    }
 }
 
-/// Flips the diagonals of quadrilaterals of the closed manifold surface `mesh` towards the
+/// Flips the diagonals of quadrilaterals of the closed, oriented 2-manifold `mesh` (any other
+/// mesh is left unchanged) towards the
 /// sharp edges described by the per-vertex (normalised) `quadrics` and unit `normals` (see the
 /// [module docs](self)); `h` is the face-score weight (`grid_scale^2`). The result is as valid
 /// as the input (closed, oriented, manifold, free of self-intersections).
@@ -605,7 +674,7 @@ mod tests {
                 .collect();
             let h = (grid * grid) as f64;
             let mut banned_sets = vec![FxHashSet::default()];
-            let every_7th: FxHashSet<(u32, u32)> = edge_faces(&out.mesh)
+            let every_7th: FxHashSet<(u32, u32)> = reference::edge_faces(&out.mesh)
                 .keys()
                 .copied()
                 .filter(|e| (e.0 + 3 * e.1) % 7 == 0)
@@ -615,7 +684,7 @@ mod tests {
                 let (mut m1, mut m2) = (out.mesh.clone(), out.mesh.clone());
                 let (mut s1, mut s2) = (FlipStats::default(), FlipStats::default());
                 let f1 = flip_pass(&mut m1, &q, &n, h, banned, &mut s1);
-                let f2 = flip_pass_sweeps(&mut m2, &q, &n, h, banned, &mut s2);
+                let f2 = reference::flip_pass_sweeps(&mut m2, &q, &n, h, banned, &mut s2);
                 assert_eq!(f1, f2, "seed {seed}: the flips differ");
                 assert_eq!(m1.faces, m2.faces, "seed {seed}: the faces differ");
                 assert_eq!(s1.passes, s2.passes, "seed {seed}");

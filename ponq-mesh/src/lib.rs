@@ -9,7 +9,7 @@
 //! [`tagging`] (inside / outside / unknown tets) -> [`score`] (face scores) ->
 //! [`maxflow`] + [`cut`] (minimum s-t cut) -> [`extract`] (oriented boundary) ->
 //! [`manifold`] (relabel tets until the boundary is a strict manifold) -> [`flips`] (quadrilateral
-//! diagonals onto the sharp edges the quadrics describe).
+//! diagonals onto the sharp edges the quadrics describe; on [`halfedge`]s).
 //! [`mesher`] runs them all.
 //!
 //! ```no_run
@@ -27,6 +27,7 @@ pub mod delaunay;
 pub mod error;
 pub mod extract;
 pub mod flips;
+pub mod halfedge;
 pub mod io;
 pub mod lite;
 pub mod manifold;

@@ -101,12 +101,20 @@ pub struct StageTimes {
     pub manifold: Duration,
     /// Boundary extraction (and open-surface culling).
     pub extraction: Duration,
+    /// Crease-aligning flips of the extracted surface.
+    pub flips: Duration,
 }
 
 impl StageTimes {
     /// Sum of all stages.
     pub fn total(&self) -> Duration {
-        self.prepare + self.delaunay + self.tagging + self.cut + self.manifold + self.extraction
+        self.prepare
+            + self.delaunay
+            + self.tagging
+            + self.cut
+            + self.manifold
+            + self.extraction
+            + self.flips
     }
 }
 
@@ -333,9 +341,11 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     let (mut mesh, back) = extract_boundary(&cx, &labels);
     let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
     if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
+        let t = Instant::now();
         let q: Vec<Quadric> = back.iter().map(|&v| cx.quadrics[v as usize]).collect();
         let n: Vec<[f64; 3]> = back.iter().map(|&v| cx.normals[v as usize]).collect();
         stats.flips = crate::flips::align_creases(&mut mesh, &q, &n, cx.h);
+        stats.times.flips = t.elapsed();
     }
     if let Some(th) = opts.open_threshold {
         let aniso: Vec<f64> = back
@@ -345,7 +355,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         let keep = cull_open(&mut mesh, &aniso, th);
         source_point = keep.iter().map(|&i| source_point[i as usize]).collect();
     }
-    stats.times.extraction = t5.elapsed();
+    stats.times.extraction = t5.elapsed() - stats.times.flips;
 
     let message = if m == 0 {
         Some("the PoNQ has no point: empty mesh".to_string())

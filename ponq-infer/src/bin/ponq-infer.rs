@@ -223,7 +223,7 @@ fn run(args: &Args) -> Result<Outcome> {
             println!("note: {m}");
         }
         println!(
-            "time (ms): read {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}), write {:.1}",
+            "time (ms): read {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}), write {:.1}",
             ms(read_time),
             ms(res.times.network),
             res.tiles,
@@ -234,6 +234,7 @@ fn run(args: &Args) -> Result<Outcome> {
             ms(s.times.cut),
             ms(s.times.manifold),
             ms(s.times.extraction),
+            ms(s.times.flips),
             ms(write_time)
         );
         if let Some(r) = &report {

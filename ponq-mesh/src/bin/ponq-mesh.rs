@@ -141,7 +141,7 @@ fn run(args: &Args) -> Result<bool> {
             s.flips.flips
         );
         println!(
-            "time (ms): read {:.1}, prepare {:.1}, delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, write {:.1}; meshing total {:.1}",
+            "time (ms): read {:.1}, prepare {:.1}, delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}, write {:.1}; meshing total {:.1}",
             ms(read_time),
             ms(s.times.prepare),
             ms(s.times.delaunay),
@@ -149,6 +149,7 @@ fn run(args: &Args) -> Result<bool> {
             ms(s.times.cut),
             ms(s.times.manifold),
             ms(s.times.extraction),
+            ms(s.times.flips),
             ms(write_time),
             ms(s.times.total())
         );

@@ -339,38 +339,41 @@ fn flip_pass(
         // The first change of an edge in this pass: `true` if it was removed (so it existed
         // when the pass started), `false` if it was created.
         let mut first_change: FxHashMap<(u32, u32), bool> = FxHashMap::default();
-        // Which edges of `base` may flip at all, decided in parallel on the faces as they are
-        // at the start of the pass (most edges fail the quadric test). An edge whose faces a
-        // flip changes later in the pass is put in `extra` and tried fully.
-        let may: Vec<bool> = {
+        // The edges of `base` that may flip at all, decided in parallel on the faces as they
+        // are at the start of the pass (most edges fail the quadric test). The others are
+        // skipped: their faces stay as they are (they cannot flip), or a flip changes them and
+        // puts them in `extra`, where they are tried fully.
+        let cands: Vec<(u32, u32)> = {
             use rayon::prelude::*;
             let st = &st;
             let mesh = &*mesh;
             match first.take() {
-                Some(hs) if st.banned.is_empty() => {
-                    hs.par_iter().map(|&h| st.may_flip_at(mesh, h)).collect()
-                }
-                _ => base.par_iter().map(|&e| st.may_flip(mesh, e)).collect(),
+                Some(hs) if st.banned.is_empty() => hs
+                    .par_iter()
+                    .zip(&base)
+                    .filter(|&(&h, _)| st.may_flip_at(mesh, h))
+                    .map(|(_, &e)| e)
+                    .collect(),
+                _ => base
+                    .par_iter()
+                    .copied()
+                    .filter(|&e| st.may_flip(mesh, e))
+                    .collect(),
             }
         };
         let mut i = 0;
         let mut last: Option<(u32, u32)> = None;
         loop {
-            let (e, from_base) = match (base.get(i), extra.first()) {
-                (Some(&x), Some(&y)) if y < x => (extra.pop_first(), None),
+            let e = match (cands.get(i), extra.first()) {
+                (Some(&x), Some(&y)) if y < x => extra.pop_first(),
                 (Some(&x), _) => {
                     i += 1;
-                    (Some(x), Some(i - 1))
+                    Some(x)
                 }
-                (None, Some(_)) => (extra.pop_first(), None),
-                (None, None) => (None, None),
+                (None, Some(_)) => extra.pop_first(),
+                (None, None) => None,
             };
             let Some(e) = e else { break };
-            if from_base.is_some_and(|k| !may[k]) {
-                // Its faces were as they are now when the pass started (it cannot flip), or
-                // a flip changed them and put it in `extra`, where it comes next.
-                continue;
-            }
             if last == Some(e) {
                 continue; // in both lists
             }

@@ -171,8 +171,8 @@ fn noise_level(h: f64) -> f64 {
     4.0 * (0.01f64).powi(2) / h.max(1e-30)
 }
 
-/// What a flip pass keeps up to date: the half-edges (faces of every edge) and the vertex
-/// degrees.
+/// What a flip pass keeps up to date: the half-edges (the faces of every edge, the vertex
+/// degrees).
 struct FlipState<'a> {
     quadrics: &'a [Quadric],
     normals: &'a [[f64; 3]],
@@ -183,8 +183,8 @@ struct FlipState<'a> {
     noise: f64,
 }
 
-/// The two faces of an edge `u v`: `f1 = (u, v, a)` at index `i1` (holding the half-edge
-/// `h1 = u -> v`), `f2 = (v, u, b)` at `i2`.
+/// The two faces of an edge `u v`: `f1 = (u, v, a)`, the face of the half-edge `h1 = u -> v`,
+/// and `f2 = (v, u, b)`, the face of its opposite.
 #[derive(Debug, Clone, Copy)]
 struct Quad {
     f1: [u32; 3],

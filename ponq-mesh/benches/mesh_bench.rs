@@ -12,40 +12,6 @@ use common::*;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::{Ponq, io, validity};
 
-/// A CAD-like closed surface: the boundary of the union of a box, a sphere and a cylinder
-/// (samples of each part kept where they are outside the other two).
-fn shape(n_samples: usize) -> Samples {
-    let mut r = rng(42);
-    let (blo, bhi) = ([-0.7, -0.5, -0.3], [0.6, 0.5, 0.35]);
-    let (sc, sr) = ([0.3, 0.1, 0.2], 0.45);
-    let (cr, cz0, cz1) = (0.3, -0.8, 0.8);
-    let in_box = |p: &[f64; 3]| (0..3).all(|k| p[k] > blo[k] && p[k] < bhi[k]);
-    let in_sphere = |p: &[f64; 3]| {
-        (p[0] - sc[0]).powi(2) + (p[1] - sc[1]).powi(2) + (p[2] - sc[2]).powi(2) < sr * sr
-    };
-    let in_cyl = |p: &[f64; 3]| p[0] * p[0] + p[1] * p[1] < cr * cr && p[2] > cz0 && p[2] < cz1;
-    let parts = [
-        box_samples(blo, bhi, n_samples / 2, &mut r),
-        sphere_samples(sc, sr, n_samples / 4, &mut r),
-        cylinder_samples(cr, cz0, cz1, n_samples / 4, &mut r),
-    ];
-    let mut s = Samples {
-        points: Vec::new(),
-        normals: Vec::new(),
-    };
-    for (i, part) in parts.into_iter().enumerate() {
-        for (p, n) in part.points.into_iter().zip(part.normals) {
-            let covered =
-                (i != 0 && in_box(&p)) || (i != 1 && in_sphere(&p)) || (i != 2 && in_cyl(&p));
-            if !covered {
-                s.points.push(p);
-                s.normals.push(n);
-            }
-        }
-    }
-    s
-}
-
 fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize) {
     let opts = MeshingOptions {
         grid_scale: grid,
@@ -118,7 +84,7 @@ fn main() {
         if !only.is_empty() && !only.contains(&grid) {
             continue;
         }
-        let ponq = ponq_by_grid(&shape(samples), grid);
+        let ponq = ponq_by_grid(&cad_union_samples(samples), grid);
         if let Some(dir) = &save {
             let path = dir.join(format!("synthetic_{grid}.npz"));
             io::npz::write_ponq(&path, &ponq).expect("writing the PoNQ");

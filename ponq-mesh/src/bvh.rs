@@ -257,6 +257,91 @@ impl Bvh {
         }
     }
 
+    /// Builds the hierarchy from the boxes sorted along a Morton (Z-order) curve of their
+    /// centres (21 bits per axis), each range split where its codes first differ (a plane of
+    /// the implicit octree; at the middle when all codes are equal): a parallel sort and one
+    /// pass of box unions instead of binning at every level, so it builds about twice as fast
+    /// as [`Bvh::build`] (the 217k faces of a mesh: about 20 vs 42 ms on two cores here) for
+    /// trees a little looser. Meant for one-shot queries over many small boxes of similar size, such as all
+    /// face pairs of a mesh, where the build dominates. Same invariants as [`Bvh::build`]
+    /// (leaves of at most [`DEFAULT_LEAF_SIZE`] items; depth at most 63 octree-plane splits
+    /// plus `log2(n)` for equal codes), same answers to every query.
+    ///
+    /// Panics if there are more than `u32::MAX - 1` boxes.
+    pub fn build_morton(boxes: &[Aabb]) -> Self {
+        use rayon::prelude::*;
+        assert!(
+            boxes.len() < u32::MAX as usize,
+            "Bvh supports fewer than 2^32 - 1 items"
+        );
+        if boxes.is_empty() {
+            return Self::default();
+        }
+        let centre = |b: &Aabb| std::array::from_fn::<f64, 3, _>(|k| b.min[k] + b.max[k]);
+        // Bounds of the (finite) centres; the codes use 21 bits per axis.
+        let (lo, hi) = boxes
+            .par_iter()
+            .map(|b| {
+                let c = centre(b);
+                if c.iter().all(|x| x.is_finite()) {
+                    (c, c)
+                } else {
+                    ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3])
+                }
+            })
+            .reduce(
+                || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+                |a, b| {
+                    (
+                        std::array::from_fn(|k| a.0[k].min(b.0[k])),
+                        std::array::from_fn(|k| a.1[k].max(b.1[k])),
+                    )
+                },
+            );
+        let scale: [f64; 3] = std::array::from_fn(|k| {
+            let e = hi[k] - lo[k];
+            if e > 0.0 && e.is_finite() {
+                ((1u32 << 21) - 1) as f64 / e
+            } else {
+                0.0
+            }
+        });
+        // Spreads the 21 low bits of x to every third bit.
+        fn spread(x: u64) -> u64 {
+            let mut x = x & 0x1f_ffff;
+            x = (x | x << 32) & 0x1f_0000_0000_ffff;
+            x = (x | x << 16) & 0x1f_0000_ff00_00ff;
+            x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+            x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+            (x | x << 2) & 0x1249_2492_4924_9249
+        }
+        let mut keyed: Vec<(u64, u32)> = boxes
+            .par_iter()
+            .enumerate()
+            .map(|(i, b)| {
+                let c = centre(b);
+                // Saturating casts: non-finite centres go to an end of the curve.
+                let q = |k: usize| (((c[k] - lo[k]) * scale[k]) as u64).min((1 << 21) - 1);
+                (
+                    spread(q(0)) << 2 | spread(q(1)) << 1 | spread(q(2)),
+                    i as u32,
+                )
+            })
+            .collect();
+        keyed.par_sort_unstable();
+        let items: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
+        let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
+        drop(keyed);
+        let sorted: Vec<Aabb> = items.par_iter().map(|&i| boxes[i as usize]).collect();
+        let mut nodes = Vec::with_capacity(2 * boxes.len() / DEFAULT_LEAF_SIZE + 2);
+        morton_rec(&mut nodes, &sorted, &codes, 0);
+        Self {
+            nodes,
+            items,
+            boxes: sorted,
+        }
+    }
+
     /// Number of items.
     pub fn len(&self) -> usize {
         self.items.len()
@@ -687,6 +772,73 @@ fn build_rec(
     }
 }
 
+/// The subtree of [`Bvh::build_morton`] over `boxes` (already in leaf order, with their sorted
+/// Morton `codes`, starting at item `start`), appended to `nodes` in depth-first pre-order;
+/// returns its box. A range is split where the highest bit in which its codes differ turns
+/// on (a plane of the octree), or at its middle when all its codes are equal.
+fn morton_rec(nodes: &mut Vec<Node>, boxes: &[Aabb], codes: &[u64], start: usize) -> Aabb {
+    let me = nodes.len();
+    nodes.push(Node {
+        aabb: Aabb::EMPTY,
+        start: start as u32,
+        end: (start + boxes.len()) as u32,
+        right: LEAF,
+    });
+    let aabb = if boxes.len() <= DEFAULT_LEAF_SIZE {
+        let mut acc = Aabb::EMPTY;
+        for b in boxes {
+            grow_box(&mut acc, b);
+        }
+        acc
+    } else {
+        let (first, last) = (codes[0], codes[codes.len() - 1]);
+        let mid = if first == last {
+            boxes.len() / 2
+        } else {
+            let bit = 63 - (first ^ last).leading_zeros();
+            codes.partition_point(|&c| c >> bit & 1 == 0)
+        };
+        let (l, r) = boxes.split_at(mid);
+        let (cl, cr) = codes.split_at(mid);
+        let (lb, rb) = if mid.min(boxes.len() - mid) >= PAR_BUILD_MIN {
+            let ((mut ln, lb), (mut rn, rb)) = rayon::join(
+                || {
+                    let mut v = Vec::with_capacity(2 * l.len() / DEFAULT_LEAF_SIZE + 2);
+                    let b = morton_rec(&mut v, l, cl, start);
+                    (v, b)
+                },
+                || {
+                    let mut v = Vec::with_capacity(2 * r.len() / DEFAULT_LEAF_SIZE + 2);
+                    let b = morton_rec(&mut v, r, cr, start + mid);
+                    (v, b)
+                },
+            );
+            let off_l = (me + 1) as u32;
+            let off_r = (me + 1 + ln.len()) as u32;
+            for n in ln.iter_mut().filter(|n| !n.is_leaf()) {
+                n.right += off_l;
+            }
+            for n in rn.iter_mut().filter(|n| !n.is_leaf()) {
+                n.right += off_r;
+            }
+            nodes[me].right = off_r;
+            nodes.append(&mut ln);
+            nodes.append(&mut rn);
+            (lb, rb)
+        } else {
+            let lb = morton_rec(nodes, l, cl, start);
+            nodes[me].right = nodes.len() as u32;
+            let rb = morton_rec(nodes, r, cr, start + mid);
+            (lb, rb)
+        };
+        let mut acc = lb;
+        grow_box(&mut acc, &rb);
+        acc
+    };
+    nodes[me].aabb = aabb;
+    aabb
+}
+
 /// Reorders `idx` (centroid bounds `cb`) and returns `(mid, left bounds, right bounds)` with
 /// `0 < mid < idx.len()`: items `..mid` go left.
 ///
@@ -927,7 +1079,10 @@ mod tests {
     #[test]
     fn tree_invariants() {
         let b = random_boxes(5000, 0.01, 5);
-        let t = Bvh::build(&b);
+        check_invariants(&Bvh::build(&b), &b);
+    }
+
+    fn check_invariants(t: &Bvh, b: &[Aabb]) {
         let mut seen = vec![false; b.len()];
         for (n, node) in t.nodes.iter().enumerate() {
             for k in node.start as usize..node.end as usize {
@@ -949,6 +1104,76 @@ mod tests {
         }
         assert!(seen.iter().all(|&s| s));
         assert!(t.depth() < 40, "depth {}", t.depth());
+    }
+
+    /// The Morton-ordered build answers every query as the SAH build and brute force do, and
+    /// keeps the tree invariants, sequential and parallel, on degenerate inputs too.
+    #[test]
+    fn morton_build_answers_the_same() {
+        for (n, size, seed) in [
+            (1, 0.1, 20),
+            (5, 0.1, 21),
+            (50, 0.2, 1),
+            (700, 0.05, 2),
+            (3000, 0.02, 3),
+        ] {
+            let b = random_boxes(n, size, seed);
+            let t = Bvh::build_morton(&b);
+            check_invariants(&t, &b);
+            let mut got = t.overlapping_pairs();
+            got.sort_unstable();
+            assert_eq!(got, brute_pairs(&b), "n = {n}");
+            for q in &random_boxes(30, 0.1, seed + 100) {
+                let mut got = Vec::new();
+                t.query_overlaps(q, |i| got.push(i));
+                got.sort_unstable();
+                let want: Vec<usize> = (0..b.len()).filter(|&i| b[i].overlaps(q)).collect();
+                assert_eq!(got, want);
+            }
+        }
+        // All centres equal, points, an empty box and a non-finite one among ordinary ones.
+        let same = vec![Aabb::new([0.0; 3], [1.0; 3]); 37];
+        assert_eq!(
+            Bvh::build_morton(&same).overlapping_pairs().len(),
+            37 * 36 / 2
+        );
+        let p = vec![Aabb::from_point([0.5; 3]); 5];
+        assert_eq!(Bvh::build_morton(&p).overlapping_pairs().len(), 10);
+        let mut odd = random_boxes(200, 0.05, 30);
+        odd[7] = Aabb::EMPTY;
+        odd[50] = Aabb::new([f64::NEG_INFINITY, 0.0, 0.0], [0.5, 0.5, 0.5]);
+        let t = Bvh::build_morton(&odd);
+        check_invariants(&t, &odd);
+        let mut got = t.overlapping_pairs();
+        got.sort_unstable();
+        assert_eq!(got, brute_pairs(&odd));
+        // Nearest item.
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let pts: Vec<[f64; 3]> = (0..3000)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+            .collect();
+        let boxes: Vec<Aabb> = pts.iter().map(|&p| Aabb::from_point(p)).collect();
+        let t = Bvh::build_morton(&boxes);
+        let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
+        for _ in 0..50 {
+            let q: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
+            let (_, d) = t.nearest(q, |i| d2(q, pts[i])).unwrap();
+            assert_eq!(
+                d,
+                pts.iter().map(|&p| d2(q, p)).fold(f64::INFINITY, f64::min)
+            );
+        }
+        // Large enough for the parallel build: the same pairs as the SAH tree.
+        let b = random_boxes(40_000, 0.002, 9);
+        let (t, sah) = (Bvh::build_morton(&b), Bvh::build(&b));
+        check_invariants(&t, &b);
+        let mut x = t.overlapping_pairs();
+        let mut y = sah.overlapping_pairs();
+        x.sort_unstable();
+        y.sort_unstable();
+        assert_eq!(x, y);
+        let count = t.par_fold_overlapping_pairs(|| 0usize, |c, _, _| *c += 1, |a, b| a + b);
+        assert_eq!(count, x.len());
     }
 
     #[test]

@@ -470,7 +470,7 @@ fn prepare(mesh: &TriMesh) -> Option<(Bvh, Vec<u8>)> {
         .into_par_iter()
         .map(|f| face_info(mesh, f))
         .collect();
-    Some((Bvh::build(&boxes), info))
+    Some((Bvh::build_morton(&boxes), info))
 }
 
 fn pair_intersects(mesh: &TriMesh, info: &[u8], i: usize, j: usize) -> bool {
@@ -512,6 +512,13 @@ fn pair_rule(
             let b = fj.iter().position(|&v| v == fi[a]).unwrap();
             let (ea0, ea1) = (ti[(a + 1) % 3], ti[(a + 2) % 3]);
             let (eb0, eb1) = (tj[(b + 1) % 3], tj[(b + 2) % 3]);
+            // Fast exit (most adjacent pairs): if the opposite edge of one triangle lies
+            // strictly on one side of the other's plane, that triangle meets the plane only
+            // at the shared vertex, so the intersection is that vertex alone.
+            let side = |t: &[[f64; 3]; 3], p: &[f64; 3]| o3(&t[0], &t[1], &t[2], p);
+            if side(&tj, &ea0) * side(&tj, &ea1) > 0 || side(&ti, &eb0) * side(&ti, &eb1) > 0 {
+                return false;
+            }
             seg_tri(&ea0, &ea1, &tj, axis(ij)) || seg_tri(&eb0, &eb1, &ti, axis(ii))
         }
         _ => {
@@ -892,6 +899,40 @@ mod tests {
             vec![[0, 1, 2], [0, 4, 3]],
         );
         assert!(faces_intersect(&r, 0, 1));
+    }
+
+    /// The one-shared-vertex fast exit of `pair_rule` (an opposite edge strictly on one side
+    /// of the other plane) never changes the answer of the full rule (both opposite edges
+    /// against the other triangle), on small integer coordinates full of coplanar and
+    /// collinear cases.
+    #[test]
+    fn shared_vertex_fast_exit_agrees_with_the_full_rule() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut coord = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 33) % 5) as f64 - 2.0
+        };
+        let (mut tested, mut touching, mut crossing) = (0, 0, 0);
+        for _ in 0..40_000 {
+            let mut p = || [coord(), coord(), coord()];
+            let (v, a, b, c, d) = (p(), p(), p(), p(), p());
+            let (ti, tj) = ([v, a, b], [v, c, d]);
+            let (Some(ii), Some(ij)) = (proj_axis(&ti), proj_axis(&tj)) else {
+                continue;
+            };
+            tested += 1;
+            let fast = pair_rule([0, 1, 2], ti, ii, [0, 3, 4], tj, ij);
+            let full = seg_tri(&a, &b, &tj, Some(ij)) || seg_tri(&c, &d, &ti, Some(ii));
+            assert_eq!(fast, full, "v {v:?} a {a:?} b {b:?} c {c:?} d {d:?}");
+            if full {
+                crossing += 1;
+            } else {
+                touching += 1;
+            }
+        }
+        assert!(tested > 20_000 && touching > 1_000 && crossing > 1_000);
     }
 
     #[test]

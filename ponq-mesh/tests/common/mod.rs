@@ -121,3 +121,37 @@ pub fn ponq_per_sample(s: &Samples) -> Ponq {
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
+
+/// A CAD-like closed surface: the boundary of the union of a box, a sphere and a cylinder
+/// (samples of each part kept where they are outside the other two): the benches' input.
+pub fn cad_union_samples(n_samples: usize) -> Samples {
+    let mut r = rng(42);
+    let (blo, bhi) = ([-0.7, -0.5, -0.3], [0.6, 0.5, 0.35]);
+    let (sc, sr) = ([0.3, 0.1, 0.2], 0.45);
+    let (cr, cz0, cz1) = (0.3, -0.8, 0.8);
+    let in_box = |p: &[f64; 3]| (0..3).all(|k| p[k] > blo[k] && p[k] < bhi[k]);
+    let in_sphere = |p: &[f64; 3]| {
+        (p[0] - sc[0]).powi(2) + (p[1] - sc[1]).powi(2) + (p[2] - sc[2]).powi(2) < sr * sr
+    };
+    let in_cyl = |p: &[f64; 3]| p[0] * p[0] + p[1] * p[1] < cr * cr && p[2] > cz0 && p[2] < cz1;
+    let parts = [
+        box_samples(blo, bhi, n_samples / 2, &mut r),
+        sphere_samples(sc, sr, n_samples / 4, &mut r),
+        cylinder_samples(cr, cz0, cz1, n_samples / 4, &mut r),
+    ];
+    let mut s = Samples {
+        points: Vec::new(),
+        normals: Vec::new(),
+    };
+    for (i, part) in parts.into_iter().enumerate() {
+        for (p, n) in part.points.into_iter().zip(part.normals) {
+            let covered =
+                (i != 0 && in_box(&p)) || (i != 1 && in_sphere(&p)) || (i != 2 && in_cyl(&p));
+            if !covered {
+                s.points.push(p);
+                s.normals.push(n);
+            }
+        }
+    }
+    s
+}

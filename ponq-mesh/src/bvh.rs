@@ -2,7 +2,9 @@
 //!
 //! [`Bvh::build`] takes one [`Aabb`] per item and builds a binary tree with a binned
 //! surface-area heuristic (falling back to median splits), stored as a flat node array in
-//! depth-first order. The tree answers:
+//! depth-first order; [`Bvh::build_morton`] builds the same kind of tree faster from a Morton
+//! (Z-order) sort of the box centres, for one-shot queries over many similar boxes (the
+//! validity check's face pairs). The tree answers:
 //!
 //! * box queries: [`Bvh::query_overlaps`];
 //! * self-overlap queries: [`Bvh::overlapping_pairs`], [`Bvh::for_each_overlapping_pair`] and

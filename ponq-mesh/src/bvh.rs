@@ -744,7 +744,7 @@ fn build_rec(
     let (mid, lb, rb) = split(idx, depth, &bounds.centroids);
     let (l, r) = idx.split_at_mut(mid);
     if l.len().min(r.len()) >= PAR_BUILD_MIN {
-        let (mut ln, mut rn) = rayon::join(
+        let (ln, rn) = rayon::join(
             || {
                 let mut v = Vec::with_capacity(2 * l.len() / ctx.leaf_size + 2);
                 build_rec(ctx, &mut v, l, start, depth + 1, lb);
@@ -756,22 +756,29 @@ fn build_rec(
                 v
             },
         );
-        let off_l = (me + 1) as u32;
-        let off_r = (me + 1 + ln.len()) as u32;
-        for n in ln.iter_mut().filter(|n| !n.is_leaf()) {
-            n.right += off_l;
-        }
-        for n in rn.iter_mut().filter(|n| !n.is_leaf()) {
-            n.right += off_r;
-        }
-        nodes[me].right = off_r;
-        nodes.append(&mut ln);
-        nodes.append(&mut rn);
+        splice_children(nodes, me, ln, rn);
     } else {
         build_rec(ctx, nodes, l, start, depth + 1, lb);
         nodes[me].right = nodes.len() as u32;
         build_rec(ctx, nodes, r, start + mid, depth + 1, rb);
     }
+}
+
+/// Appends the two subtrees of node `me`, built separately (their `right` links relative to
+/// their own first node), after `nodes`, whose last node is `me`: shifts their links and
+/// points `me`'s right link at the second.
+fn splice_children(nodes: &mut Vec<Node>, me: usize, mut ln: Vec<Node>, mut rn: Vec<Node>) {
+    let off_l = (me + 1) as u32;
+    let off_r = (me + 1 + ln.len()) as u32;
+    for n in ln.iter_mut().filter(|n| !n.is_leaf()) {
+        n.right += off_l;
+    }
+    for n in rn.iter_mut().filter(|n| !n.is_leaf()) {
+        n.right += off_r;
+    }
+    nodes[me].right = off_r;
+    nodes.append(&mut ln);
+    nodes.append(&mut rn);
 }
 
 /// The subtree of [`Bvh::build_morton`] over `boxes` (already in leaf order, with their sorted
@@ -803,7 +810,7 @@ fn morton_rec(nodes: &mut Vec<Node>, boxes: &[Aabb], codes: &[u64], start: usize
         let (l, r) = boxes.split_at(mid);
         let (cl, cr) = codes.split_at(mid);
         let (lb, rb) = if mid.min(boxes.len() - mid) >= PAR_BUILD_MIN {
-            let ((mut ln, lb), (mut rn, rb)) = rayon::join(
+            let ((ln, lb), (rn, rb)) = rayon::join(
                 || {
                     let mut v = Vec::with_capacity(2 * l.len() / DEFAULT_LEAF_SIZE + 2);
                     let b = morton_rec(&mut v, l, cl, start);
@@ -815,17 +822,7 @@ fn morton_rec(nodes: &mut Vec<Node>, boxes: &[Aabb], codes: &[u64], start: usize
                     (v, b)
                 },
             );
-            let off_l = (me + 1) as u32;
-            let off_r = (me + 1 + ln.len()) as u32;
-            for n in ln.iter_mut().filter(|n| !n.is_leaf()) {
-                n.right += off_l;
-            }
-            for n in rn.iter_mut().filter(|n| !n.is_leaf()) {
-                n.right += off_r;
-            }
-            nodes[me].right = off_r;
-            nodes.append(&mut ln);
-            nodes.append(&mut rn);
+            splice_children(nodes, me, ln, rn);
             (lb, rb)
         } else {
             let lb = morton_rec(nodes, l, cl, start);

@@ -1050,14 +1050,22 @@ mod tests {
         }
     }
 
+    /// Nearest-item queries of both builds (SAH and Morton order) against brute force.
     #[test]
     fn nearest_matches_brute_force() {
+        let builds: [fn(&[Aabb]) -> Bvh; 2] = [Bvh::build, Bvh::build_morton];
+        for build in builds {
+            nearest_against_brute_force(build);
+        }
+    }
+
+    fn nearest_against_brute_force(build: fn(&[Aabb]) -> Bvh) {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let pts: Vec<[f64; 3]> = (0..3000)
             .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
             .collect();
         let boxes: Vec<Aabb> = pts.iter().map(|&p| Aabb::from_point(p)).collect();
-        let t = Bvh::build(&boxes);
+        let t = build(&boxes);
         let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
         for _ in 0..100 {
             let q: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
@@ -1106,7 +1114,8 @@ mod tests {
     }
 
     /// The Morton-ordered build answers every query as the SAH build and brute force do, and
-    /// keeps the tree invariants, sequential and parallel, on degenerate inputs too.
+    /// keeps the tree invariants, sequential and parallel, on degenerate inputs too (nearest
+    /// items: `nearest_matches_brute_force`).
     #[test]
     fn morton_build_answers_the_same() {
         for (n, size, seed) in [
@@ -1146,22 +1155,6 @@ mod tests {
         let mut got = t.overlapping_pairs();
         got.sort_unstable();
         assert_eq!(got, brute_pairs(&odd));
-        // Nearest item.
-        let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let pts: Vec<[f64; 3]> = (0..3000)
-            .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
-            .collect();
-        let boxes: Vec<Aabb> = pts.iter().map(|&p| Aabb::from_point(p)).collect();
-        let t = Bvh::build_morton(&boxes);
-        let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
-        for _ in 0..50 {
-            let q: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
-            let (_, d) = t.nearest(q, |i| d2(q, pts[i])).unwrap();
-            assert_eq!(
-                d,
-                pts.iter().map(|&p| d2(q, p)).fold(f64::INFINITY, f64::min)
-            );
-        }
         // Large enough for the parallel build: the same pairs as the SAH tree.
         let b = random_boxes(40_000, 0.002, 9);
         let (t, sah) = (Bvh::build_morton(&b), Bvh::build(&b));

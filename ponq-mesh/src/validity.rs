@@ -907,13 +907,9 @@ mod tests {
     /// collinear cases.
     #[test]
     fn shared_vertex_fast_exit_agrees_with_the_full_rule() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut coord = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 33) % 5) as f64 - 2.0
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let mut coord = || rng.random_range(-2i32..=2) as f64;
         let (mut tested, mut touching, mut crossing) = (0, 0, 0);
         for _ in 0..40_000 {
             let mut p = || [coord(), coord(), coord()];

@@ -1357,25 +1357,56 @@ impl Builder {
                 .iter()
                 .map(|o| o - base)
                 .collect();
+            // The slots of this part's tets, bucket by bucket (in slot order inside a bucket):
+            // 4-byte scattered writes into a small array.
             let mut ps = vec![0u32; pt.len()];
             for (s, &f) in key.iter().enumerate() {
                 if f >= lo && f < hi {
-                    let (tv, tn) = (arena[s].verts(), arena[s].nbrs());
-                    let p = EVEN_PERMS[canonical_rotation(tv) as usize];
-                    let i = fill[(f - lo) as usize] as usize;
-                    pt[i] = p.map(|k| tv[k]);
-                    pn[i] = p.map(|k| tn[k]);
-                    ps[i] = s as u32;
-                    fill[(f - lo) as usize] += 1;
+                    let i = &mut fill[(f - lo) as usize];
+                    ps[*i as usize] = s as u32;
+                    *i += 1;
                 }
             }
+            // Then the rotated tets in that order: sequential writes, and reads of the arena
+            // that do not depend on each other, so their cache misses overlap. (Writing the
+            // 32 bytes of each tet straight to its bucket, as the slots were scanned, took
+            // twice as long: two scattered cache-line writes per tet.)
+            for ((t, nb), &s) in pt.iter_mut().zip(pn.iter_mut()).zip(&ps) {
+                let (tv, tn) = (arena[s as usize].verts(), arena[s as usize].nbrs());
+                let p = EVEN_PERMS[canonical_rotation(tv) as usize];
+                *t = p.map(|k| tv[k]);
+                *nb = p.map(|k| tn[k]);
+            }
+            // Each bucket sorted by its rotated vertices. A small bucket (about 7 tets on
+            // average) is sorted by rank, with no branch on the data: each tet goes to the
+            // number of smaller ones (the tets of a bucket are distinct). Measured: half the
+            // time of a comparison sort, whose branches the random orders mispredict.
+            const RANK_SORT_MAX: usize = 24;
+            let mut ranked = [(0u128, [0u32; 4], [0u32; 4], 0u32); RANK_SORT_MAX];
             let mut bucket: Vec<([u32; 4], [u32; 4], u32)> = Vec::new();
             for v in lo..hi {
                 let (a, b) = (
                     (offsets[v as usize] - base) as usize,
                     (offsets[v as usize + 1] - base) as usize,
                 );
-                if b - a > 1 {
+                let len = b - a;
+                if len < 2 {
+                    continue;
+                }
+                if len <= RANK_SORT_MAX {
+                    for (q, r) in ranked[..len].iter_mut().enumerate() {
+                        let t = pt[a + q];
+                        let lex = t.iter().fold(0u128, |acc, &x| acc << 32 | x as u128);
+                        *r = (lex, t, pn[a + q], ps[a + q]);
+                    }
+                    for &(lex, t, nb, s) in &ranked[..len] {
+                        let r = a + ranked[..len]
+                            .iter()
+                            .map(|x| (x.0 < lex) as usize)
+                            .sum::<usize>();
+                        (pt[r], pn[r], ps[r]) = (t, nb, s);
+                    }
+                } else {
                     bucket.clear();
                     bucket.extend((a..b).map(|i| (pt[i], pn[i], ps[i])));
                     bucket.sort_unstable_by_key(|it| it.0);

@@ -4,12 +4,13 @@
 //! ```sh
 //! cargo bench -p ponq-mesh --bench delaunay_bench                     # the built-in sets
 //! cargo bench -p ponq-mesh --bench delaunay_bench -- --write DIR      # also write them as DIR/*.f64
-//! cargo bench -p ponq-mesh --bench delaunay_bench -- A.f64 B.f64      # point files instead
+//! cargo bench -p ponq-mesh --bench delaunay_bench -- A.f64 B.npz      # point files instead
 //! ponq-mesh/benches/cgal/side_by_side.sh                              # the same points in CGAL
 //! ```
 //!
 //! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5.
-//! A point file is raw little-endian `f64` x, y, z triples (what `--write` writes and
+//! A `.npz` file is a PoNQ (its v* are triangulated); any other point file is raw
+//! little-endian `f64` x, y, z triples (what `--write` writes and
 //! `benches/cgal/delaunay_cgal.cpp` reads).
 
 use ponq_mesh::delaunay::Delaunay;
@@ -97,7 +98,16 @@ fn main() {
     } else {
         files
             .iter()
-            .map(|f| (f.display().to_string(), read_points(f)))
+            .map(|f| {
+                let pts = if f.extension().is_some_and(|e| e == "npz") {
+                    ponq_mesh::io::npz::read_ponq(f)
+                        .unwrap_or_else(|e| panic!("cannot read {}: {e}", f.display()))
+                        .vstars()
+                } else {
+                    read_points(f)
+                };
+                (f.display().to_string(), pts)
+            })
             .collect()
     };
     if let Some(dir) = &write_dir {

@@ -998,6 +998,62 @@ fn canonical_rotation(tv: [u32; 4]) -> u8 {
     (3 * i + j) as u8
 }
 
+/// Buckets of at most this many tets are sorted by rank (see [`sort_bucket`]).
+const RANK_SORT_MAX: usize = 24;
+
+/// Scratch space of [`sort_bucket`].
+struct BucketScratch {
+    ranked: [(u128, [u32; 4], [u32; 4], u32); RANK_SORT_MAX],
+    bucket: Vec<([u32; 4], [u32; 4], u32)>,
+}
+
+impl Default for BucketScratch {
+    fn default() -> Self {
+        Self {
+            ranked: [(0, [0; 4], [0; 4], 0); RANK_SORT_MAX],
+            bucket: Vec::new(),
+        }
+    }
+}
+
+/// Sorts one bucket of output tets by their (rotated) vertices, moving each tet's neighbours
+/// and slot with it. The tets must be distinct (they are: distinct tets of a triangulation).
+/// A small bucket (about 7 tets on average) is sorted by rank, with no branch on the data:
+/// each tet goes to the number of smaller ones (measured: half the time of a comparison sort,
+/// whose branches the random orders mispredict); a larger one by a comparison sort.
+fn sort_bucket(
+    pt: &mut [[u32; 4]],
+    pn: &mut [[u32; 4]],
+    ps: &mut [u32],
+    scratch: &mut BucketScratch,
+) {
+    let len = pt.len();
+    if len < 2 {
+        return;
+    }
+    if len <= RANK_SORT_MAX {
+        let ranked = &mut scratch.ranked[..len];
+        for (q, r) in ranked.iter_mut().enumerate() {
+            let t = pt[q];
+            // Lexicographic order of the four vertices as one number.
+            let lex = t.iter().fold(0u128, |acc, &x| acc << 32 | x as u128);
+            *r = (lex, t, pn[q], ps[q]);
+        }
+        for &(lex, t, nb, s) in ranked.iter() {
+            let r = ranked.iter().map(|x| (x.0 < lex) as usize).sum::<usize>();
+            (pt[r], pn[r], ps[r]) = (t, nb, s);
+        }
+    } else {
+        let bucket = &mut scratch.bucket;
+        bucket.clear();
+        bucket.extend((0..len).map(|i| (pt[i], pn[i], ps[i])));
+        bucket.sort_unstable_by_key(|it| it.0);
+        for (i, it) in bucket.iter().enumerate() {
+            (pt[i], pn[i], ps[i]) = *it;
+        }
+    }
+}
+
 struct Builder {
     /// Real vertices (in insertion order) followed by the 4 super-tetrahedron vertices.
     pos: Vec<[f64; 3]>,
@@ -1377,43 +1433,14 @@ impl Builder {
                 *t = p.map(|k| tv[k]);
                 *nb = p.map(|k| tn[k]);
             }
-            // Each bucket sorted by its rotated vertices. A small bucket (about 7 tets on
-            // average) is sorted by rank, with no branch on the data: each tet goes to the
-            // number of smaller ones (the tets of a bucket are distinct). Measured: half the
-            // time of a comparison sort, whose branches the random orders mispredict.
-            const RANK_SORT_MAX: usize = 24;
-            let mut ranked = [(0u128, [0u32; 4], [0u32; 4], 0u32); RANK_SORT_MAX];
-            let mut bucket: Vec<([u32; 4], [u32; 4], u32)> = Vec::new();
+            // Each bucket sorted by its rotated vertices.
+            let mut scratch = BucketScratch::default();
             for v in lo..hi {
                 let (a, b) = (
                     (offsets[v as usize] - base) as usize,
                     (offsets[v as usize + 1] - base) as usize,
                 );
-                let len = b - a;
-                if len < 2 {
-                    continue;
-                }
-                if len <= RANK_SORT_MAX {
-                    for (q, r) in ranked[..len].iter_mut().enumerate() {
-                        let t = pt[a + q];
-                        let lex = t.iter().fold(0u128, |acc, &x| acc << 32 | x as u128);
-                        *r = (lex, t, pn[a + q], ps[a + q]);
-                    }
-                    for &(lex, t, nb, s) in &ranked[..len] {
-                        let r = a + ranked[..len]
-                            .iter()
-                            .map(|x| (x.0 < lex) as usize)
-                            .sum::<usize>();
-                        (pt[r], pn[r], ps[r]) = (t, nb, s);
-                    }
-                } else {
-                    bucket.clear();
-                    bucket.extend((a..b).map(|i| (pt[i], pn[i], ps[i])));
-                    bucket.sort_unstable_by_key(|it| it.0);
-                    for (i, it) in (a..b).zip(&bucket) {
-                        (pt[i], pn[i], ps[i]) = *it;
-                    }
-                }
+                sort_bucket(&mut pt[a..b], &mut pn[a..b], &mut ps[a..b], &mut scratch);
             }
             for (i, &s) in ps.iter().enumerate() {
                 new_id[s as usize].store(base + i as u32 + 1, Relaxed);
@@ -1434,6 +1461,46 @@ impl Builder {
             tets,
             neighbors,
             stats,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both paths of `sort_bucket` (rank sort and comparison sort) order the tets as a plain
+    /// sort of the (tet, neighbours, slot) triples does.
+    #[test]
+    fn buckets_sort_like_a_plain_sort() {
+        let mut rng = SplitMix(7);
+        let mut scratch = BucketScratch::default();
+        for len in 0..=2 * RANK_SORT_MAX {
+            for round in 0..20 {
+                // Distinct tets with few distinct vertex numbers (shared prefixes, as in a
+                // bucket: every tet has the bucket's vertex) and, in some rounds, large ones.
+                let range = if round % 2 == 0 {
+                    6
+                } else {
+                    u32::MAX as u64 + 1
+                };
+                let mut items: Vec<([u32; 4], [u32; 4], u32)> = Vec::new();
+                while items.len() < len {
+                    let t = [0; 4].map(|_: u32| (rng.next() % range) as u32);
+                    if items.iter().all(|it| it.0 != t) {
+                        let n = [0; 4].map(|_: u32| rng.next() as u32);
+                        items.push((t, n, rng.next() as u32));
+                    }
+                }
+                let mut pt: Vec<[u32; 4]> = items.iter().map(|it| it.0).collect();
+                let mut pn: Vec<[u32; 4]> = items.iter().map(|it| it.1).collect();
+                let mut ps: Vec<u32> = items.iter().map(|it| it.2).collect();
+                sort_bucket(&mut pt, &mut pn, &mut ps, &mut scratch);
+                items.sort_unstable();
+                let got: Vec<([u32; 4], [u32; 4], u32)> =
+                    (0..len).map(|i| (pt[i], pn[i], ps[i])).collect();
+                assert_eq!(got, items, "bucket of {len}, round {round}");
+            }
         }
     }
 }

@@ -1425,8 +1425,8 @@ impl Builder {
             }
             // Then the rotated tets in that order: sequential writes, and reads of the arena
             // that do not depend on each other, so their cache misses overlap. (Writing the
-            // 32 bytes of each tet straight to its bucket, as the slots were scanned, took
-            // twice as long: two scattered cache-line writes per tet.)
+            // 32 bytes of each tet straight to its bucket as the slots were scanned: ~31 ms
+            // at 100k points on one thread, against ~21 ms for these two passes.)
             for ((t, nb), &s) in pt.iter_mut().zip(pn.iter_mut()).zip(&ps) {
                 let (tv, tn) = (arena[s as usize].verts(), arena[s as usize].nbrs());
                 let p = EVEN_PERMS[canonical_rotation(tv) as usize];

@@ -1330,7 +1330,8 @@ impl Builder {
         // The locks apart from the tets: 36-byte tets instead of 40 made one-thread insertion
         // ~10% faster and the parallel phase ~8%, side by side. Tried: one lock per 4 to 64
         // consecutive slots (a cavity and its neighbours sit in few such blocks): fewer
-        // compare-exchanges but more back-offs, no faster.
+        // compare-exchanges but more back-offs, no faster; the marks apart too (32-byte tets,
+        // a mark array beside them): no faster either (the cavity search reads both).
         // Zeroed pages: the locks of slots never used cost nothing.
         let locks: Vec<AtomicU32> = bytemuck::allocation::zeroed_vec(self.used);
         {

@@ -658,8 +658,8 @@ impl Worker {
     #[inline]
     fn unlock_all<const PAR: bool>(&mut self, sh: &Shared) {
         if PAR {
-            for &b in &self.held {
-                sh.locks[b as usize].store(0, Release);
+            for &t in &self.held {
+                sh.locks[t as usize].store(0, Release);
             }
         }
         self.held.clear();

@@ -566,7 +566,7 @@ struct Worker {
     stack: Vec<(u32, u8)>,
     cavity: Vec<u32>,
     /// Tets stamped by the current insertion: the cavity and its neighbours.
-    locked: Vec<u32>,
+    stamped: Vec<u32>,
     /// Slots locked by the current insertion (parallel phase).
     held: Vec<u32>,
     boundary: Vec<(u32, u8, u32, u8)>,
@@ -602,7 +602,7 @@ impl Worker {
             rng: SplitMix(seed),
             stack: Vec::new(),
             cavity: Vec::new(),
-            locked: Vec::new(),
+            stamped: Vec::new(),
             held: Vec::new(),
             boundary: Vec::new(),
             new_tets: Vec::new(),
@@ -871,7 +871,7 @@ impl Worker {
     /// Undoes the stamps and locks of a failed insertion.
     fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
         if PAR {
-            for &t in &self.locked {
+            for &t in &self.stamped {
                 sh.tets[t as usize].set_mark(NO_STAMP);
             }
             self.unlock_all::<PAR>(sh);
@@ -883,7 +883,7 @@ impl Worker {
                 sh.tets[t as usize].set_mark(NO_STAMP);
             }
         }
-        self.locked.clear();
+        self.stamped.clear();
         fail
     }
 
@@ -895,8 +895,8 @@ impl Worker {
         self.cavity.clear();
         self.boundary.clear();
         self.stack.clear();
-        self.locked.clear();
-        self.locked.push(t);
+        self.stamped.clear();
+        self.stamped.push(t);
         // Each stack entry keeps the face it was entered through (4: none), which leads back
         // into the cavity and needs no look.
         self.stack.push((t, 4));
@@ -905,7 +905,7 @@ impl Worker {
             self.cavity.push(c);
             let cn = sh.tets[c as usize].nbrs();
             // Touch the four neighbours together so that their cache misses overlap.
-            let first_touch =
+            let marks_seen =
                 cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.mark.load(Relaxed)));
             // The other faces: three after the entry face, or all four of the first tet
             // (a count instead of a skip, which would be a branch on the data).
@@ -924,8 +924,8 @@ impl Worker {
                     }
                     // Stamped below unless it is already (a failed attempt at `v` left no
                     // stamp: `back_off` clears them).
-                    let seen = first_touch[k as usize];
-                    push_if(&mut self.locked, nb, seen != in_cav && seen != not_cav);
+                    let seen = marks_seen[k as usize];
+                    push_if(&mut self.stamped, nb, seen != in_cav && seen != not_cav);
                 }
                 let mark = nt.mark();
                 if mark == in_cav {
@@ -1029,7 +1029,7 @@ impl Worker {
         self.last = self.new_tets[0].1;
         // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
         self.unlock_all::<PAR>(sh);
-        self.locked.clear();
+        self.stamped.clear();
         Ok(())
     }
 }

@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ponq_infer::{InferOptions, infer};
 use ponq_mesh::metrics::{MetricOptions, compare};
+use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{TriMesh, validity};
 use ponq_model::PonqNet;
 
@@ -49,6 +50,8 @@ pub struct EvalOptions {
     pub coarsen: u32,
     /// Adaptive PoNQ-lite angle of the PoNQ rows (`ponq_infer::InferOptions::merge_smooth`).
     pub merge_smooth: Option<f64>,
+    /// Which labels the mesher's small-tet rule adds (`ponq_mesh::tagging::SmallTetRule`).
+    pub small_tet_rule: SmallTetRule,
     /// Surface / edge samples per mesh for the metrics.
     pub samples: usize,
     /// Shapes (the first ones) rendered side by side.
@@ -137,6 +140,7 @@ pub fn evaluate(
                     lite: m == Method::Lite,
                     coarsen: if m == Method::Lite { opts.coarsen } else { 0 },
                     merge_smooth: opts.merge_smooth,
+                    small_tet_rule: opts.small_tet_rule,
                     ..Default::default()
                 };
                 match infer(net, encoder_layers, &grid, &io, device, |_, _| {}) {

@@ -25,6 +25,7 @@
 //!     methods: vec![Method::Ponq, Method::Mc],
 //!     coarsen: 0,
 //!     merge_smooth: Some(15.0),
+//!     small_tet_rule: Default::default(),
 //!     samples: 100_000,
 //!     renders: 0,
 //!     tile: 0,

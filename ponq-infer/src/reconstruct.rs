@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ponq_mesh::io::npy::Grid3;
 use ponq_mesh::mesher::{MeshingOptions, MeshingStats, mesh_ponq};
+use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{Ponq, TriMesh};
 use ponq_model::{PonqNet, network_input_scale};
 
@@ -40,6 +41,9 @@ pub struct InferOptions {
     pub open: Option<f64>,
     /// Flip quadrilateral diagonals onto sharp edges (`ponq_mesh::flips`; default true).
     pub align_creases: bool,
+    /// Which labels the tagging's small-tet rule adds (`ponq_mesh::tagging::SmallTetRule`;
+    /// default inside only, as the authors' code).
+    pub small_tet_rule: SmallTetRule,
     /// Cells are kept when their occupancy exceeds this (0.5).
     pub occupancy_threshold: f32,
     /// Use the authors' cell bases (only for their pretrained weights).
@@ -56,6 +60,7 @@ impl Default for InferOptions {
             merge_smooth: Some(DEFAULT_MERGE_SMOOTH_DEG),
             open: None,
             align_creases: true,
+            small_tet_rule: SmallTetRule::InsideOnly,
             occupancy_threshold: 0.5,
             authors_cell_base: false,
         }
@@ -178,6 +183,7 @@ pub fn infer(
         ),
         open_threshold: opts.open,
         align_creases: opts.align_creases,
+        small_tet_rule: opts.small_tet_rule,
         ..Default::default()
     };
     let (mesh, meshing, message) = if ponq.is_empty() {

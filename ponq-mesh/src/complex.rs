@@ -1,6 +1,7 @@
 //! The tetrahedral complex the mesher works on: the Delaunay tetrahedralisation of the v*
-//! plus the eight protective corners, with the PoNQ data (unit normal, normalised quadric)
-//! attached to each vertex, and the inside / outside labels of the tets.
+//! plus the eight protective corners, with the PoNQ data (unit normal and the length of the
+//! raw one, normalised quadric) attached to each vertex, and the inside / outside labels of
+//! the tets.
 
 use crate::delaunay::{Delaunay, NONE};
 use crate::predicates::orient3d;
@@ -23,8 +24,8 @@ pub const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
 /// Delaunay tets with per-vertex PoNQ data.
 ///
-/// Invariants: `normals`, `quadrics`, `protective` and `vertex_tet` have one entry per
-/// Delaunay vertex; normals are unit length or zero; quadrics are normalised (largest
+/// Invariants: `normals`, `normal_lengths`, `quadrics`, `protective` and `vertex_tet` have one
+/// entry per Delaunay vertex; normals are unit length or zero, normal lengths finite and >= 0; quadrics are normalised (largest
 /// eigenvalue of `A` is 1, or `A = 0`); `vertex_tet[v]` is a tet containing `v` ([`NONE`] when
 /// no tet does).
 #[derive(Debug, Clone)]
@@ -33,6 +34,10 @@ pub struct TetComplex {
     pub dt: Delaunay,
     /// Unit normal per vertex (zero when unknown).
     pub normals: Vec<[f64; 3]>,
+    /// Length of each vertex's raw normal (the PoNQ's normal, not normalised: a mean of unit
+    /// normals, short where they disagree): the barycentre test of the tagging weighs each
+    /// vertex's plane by it, as the authors' mesher does ([`crate::tagging::tag_tet`]).
+    pub normal_lengths: Vec<f64>,
     /// Normalised quadric per vertex.
     pub quadrics: Vec<Quadric>,
     /// True for the protective corner points.
@@ -53,6 +58,7 @@ impl TetComplex {
     pub fn new(
         dt: Delaunay,
         normals: Vec<[f64; 3]>,
+        normal_lengths: Vec<f64>,
         quadrics: Vec<Quadric>,
         protective: Vec<bool>,
         cell_size: f64,
@@ -62,6 +68,7 @@ impl TetComplex {
         Self {
             dt,
             normals,
+            normal_lengths,
             quadrics,
             protective,
             vertex_tet,
@@ -207,6 +214,7 @@ mod tests {
             let cx = TetComplex::new(
                 dt,
                 vec![[0.0; 3]; nv],
+                vec![0.0; nv],
                 vec![Quadric::zero(); nv],
                 vec![false; nv],
                 0.1,

@@ -11,7 +11,7 @@ use crate::manifold::{ManifoldStats, make_manifold};
 use crate::open_surface::cull_open;
 use crate::ponq::Ponq;
 use crate::quadric::{Quadric, SVD_CUTOFF};
-use crate::tagging::tag_all;
+use crate::tagging::{SmallTetRule, tag_all};
 use crate::trimesh::TriMesh;
 
 /// Options of [`mesh_ponq`].
@@ -25,6 +25,9 @@ pub struct MeshingOptions {
     pub domain: ([f64; 3], [f64; 3]),
     /// Small-tet rule factor: threshold `factor * cell^2` (authors: 3).
     pub small_tet_factor: f64,
+    /// Which labels the small-tet rule adds ([`SmallTetRule`]; default: inside only, as the
+    /// authors' mesher).
+    pub small_tet_rule: SmallTetRule,
     /// Relabel tets so that the output is a strict manifold (default true).
     pub manifold: bool,
     /// Open-surface culling: keep a triangle only if one of its vertices has anisotropy
@@ -42,6 +45,7 @@ impl Default for MeshingOptions {
             grid_scale: 32.0,
             domain: ([-1.0; 3], [1.0; 3]),
             small_tet_factor: 3.0,
+            small_tet_rule: SmallTetRule::InsideOnly,
             manifold: true,
             open_threshold: None,
             align_creases: true,
@@ -272,52 +276,70 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         .map(|i| (dt.vertex_of_point[i], i as u32))
         .collect();
     merged.sort_by_key(|&(v, _)| v);
-    let (normals, quadrics): (Vec<[f64; 3]>, Vec<Quadric>) = {
+    // Each vertex's unit normal, the length of its raw normal (the mean of its points' raw
+    // normals: the barycentre test of the tagging weighs by it, as the authors do) and its
+    // quadric.
+    let per_vertex: Vec<([f64; 3], f64, Quadric)> = {
         use rayon::prelude::*;
         (0..nv)
             .into_par_iter()
             .map(|v| {
-                let (n, q) = if corner[v] != u32::MAX {
+                if corner[v] != u32::MAX {
                     let c = points[corner[v] as usize];
-                    (
+                    return (
                         unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]),
+                        1.0,
                         Quadric::identity_at(c),
-                    )
-                } else {
-                    let (mut n, mut q) = ([0.0; 3], Quadric::zero());
-                    let mut add = |i: usize| {
-                        let ni = unit(ponq.normals[i]);
-                        for k in 0..3 {
-                            n[k] += ni[k];
-                        }
-                        q += ponq.quadrics[i].scaled_by_largest(scales[i]);
-                    };
-                    if sources[v] == 1 {
-                        add(source[v] as usize);
-                    } else {
-                        let at = merged.partition_point(|&(w, _)| (w as usize) < v);
-                        for &(_, i) in merged[at..].iter().take_while(|&&(w, _)| w as usize == v) {
-                            add(i as usize);
-                        }
+                    );
+                }
+                let (mut n, mut raw, mut q) = ([0.0; 3], [0.0; 3], Quadric::zero());
+                let mut add = |i: usize| {
+                    let ni = unit(ponq.normals[i]);
+                    for k in 0..3 {
+                        n[k] += ni[k];
+                        raw[k] += ponq.normals[i][k];
                     }
-                    (n, q)
+                    q += ponq.quadrics[i].scaled_by_largest(scales[i]);
                 };
+                if sources[v] == 1 {
+                    add(source[v] as usize);
+                } else {
+                    let at = merged.partition_point(|&(w, _)| (w as usize) < v);
+                    for &(_, i) in merged[at..].iter().take_while(|&&(w, _)| w as usize == v) {
+                        add(i as usize);
+                    }
+                }
+                let len = (raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2]).sqrt()
+                    / f64::from(sources[v].max(1));
                 // A single normalised quadric is already normalised; a sum of several is not.
-                (unit(n), if sources[v] > 1 { q.normalized() } else { q })
+                (
+                    unit(n),
+                    if len.is_finite() { len } else { 0.0 },
+                    if sources[v] > 1 { q.normalized() } else { q },
+                )
             })
-            .unzip()
+            .collect()
     };
+    let mut normals = Vec::with_capacity(nv);
+    let mut normal_lengths = Vec::with_capacity(nv);
+    let mut quadrics = Vec::with_capacity(nv);
+    for (n, l, q) in per_vertex {
+        normals.push(n);
+        normal_lengths.push(l);
+        quadrics.push(q);
+    }
     stats.vertices = nv;
     stats.tets = dt.tets.len();
     let cx = TetComplex::new(
         dt,
         normals,
+        normal_lengths,
         quadrics,
         corner.iter().map(|&c| c != u32::MAX).collect(),
         cell,
         opts.grid_scale * opts.grid_scale,
     );
-    let mut labels = tag_all(&cx, opts.small_tet_factor);
+    let mut labels = tag_all(&cx, opts.small_tet_factor, opts.small_tet_rule);
     for l in &labels {
         match l {
             Label::Inside => stats.tagged[0] += 1,
@@ -336,7 +358,6 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         stats.manifold = make_manifold(&cx, &mut labels);
     }
     stats.times.manifold = t4.elapsed();
-
     let t5 = Instant::now();
     let (mut mesh, back) = extract_boundary(&cx, &labels);
     let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();

@@ -215,6 +215,10 @@ struct RunArgs {
     /// cell's points whose normals agree within DEG degrees; 0 keeps every point.
     #[arg(long, value_name = "DEG", default_value_t = ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG)]
     merge_smooth: f64,
+    /// The mesher's small-tet rule as the paper's text has it (inside and outside tets; the
+    /// rule before 2026-12-03) instead of the authors' code (inside tets only, the default).
+    #[arg(long)]
+    small_tets_both_ways: bool,
     /// Skip the marching cubes baseline.
     #[arg(long)]
     no_mc: bool,
@@ -311,6 +315,11 @@ fn run_split(a: RunArgs) -> Result<()> {
         methods,
         coarsen: a.coarsen,
         merge_smooth: (a.merge_smooth > 0.0).then_some(a.merge_smooth),
+        small_tet_rule: if a.small_tets_both_ways {
+            ponq_mesh::tagging::SmallTetRule::BothWays
+        } else {
+            ponq_mesh::tagging::SmallTetRule::InsideOnly
+        },
         samples: a.samples,
         renders: a.renders,
         tile: 0,

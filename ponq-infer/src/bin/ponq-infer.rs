@@ -10,6 +10,7 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_infer::{InferOptions, infer, shipped};
 use ponq_mesh::mesher::MeshingOptions;
+use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{io, validity};
 use ponq_model::backend::{BackendKind, device};
 
@@ -72,6 +73,12 @@ struct Args {
     /// onto the sharp edges the quadrics describe.
     #[arg(long)]
     no_crease_flips: bool,
+    /// The small-tet rule of the tagging as the paper's text has it (a vertex without an inside
+    /// or without an outside tet gets its smallest unknown tet tagged the missing way; the
+    /// mesher's rule before 2026-12-03) instead of the authors' code (inside tets only, the
+    /// default: sharper edges, see README).
+    #[arg(long)]
+    small_tets_both_ways: bool,
     /// Layer implementation on the CPU: fast (custom kernels, default), fast-bf16 (the same
     /// with bf16 GEMM inputs and f32 sums: AMX tiles or AVX-512 BF16, an error on CPUs
     /// without) or stock (Burn's Conv3d layers). fast and stock give the same numbers up to
@@ -168,6 +175,11 @@ fn run(args: &Args) -> Result<Outcome> {
         open: args.open,
         authors_cell_base: authors,
         align_creases: !args.no_crease_flips,
+        small_tet_rule: if args.small_tets_both_ways {
+            SmallTetRule::BothWays
+        } else {
+            SmallTetRule::InsideOnly
+        },
         ..Default::default()
     };
     let pb = if args.quiet {

@@ -9,6 +9,7 @@ use clap::Parser;
 use ponq_mesh::io;
 use ponq_mesh::lite::{cell_of, coarsen, merge_smooth_cells};
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::validity;
 
 /// Mesh a PoNQ file (points, normals, quadrics) into a closed, oriented, manifold,
@@ -61,6 +62,12 @@ struct Args {
     /// onto the sharp edges the quadrics describe (the behaviour before these flips).
     #[arg(long)]
     no_crease_flips: bool,
+    /// The small-tet rule of the tagging as the paper's text has it (a vertex without an inside
+    /// or without an outside tet gets its smallest unknown tet tagged the missing way; the
+    /// mesher's rule before 2026-12-03) instead of the authors' code (inside tets only, the
+    /// default: sharper edges, see README).
+    #[arg(long)]
+    small_tets_both_ways: bool,
     /// Skip the exact validity check of the output (it is cheap; on by default).
     #[arg(long)]
     no_check: bool,
@@ -106,6 +113,11 @@ fn run(args: &Args) -> Result<bool> {
         manifold: !args.no_manifold,
         open_threshold: args.open,
         align_creases: !args.no_crease_flips,
+        small_tet_rule: if args.small_tets_both_ways {
+            SmallTetRule::BothWays
+        } else {
+            SmallTetRule::InsideOnly
+        },
         ..Default::default()
     };
     let out = mesh_ponq(&ponq, &opts)?;

@@ -36,6 +36,7 @@ for m in "${meshes[@]}"; do
     echo "$n $r authors: $("$py" "$here/authors_mesh.py" "$p" "$r" "$out/${n}_$r.authors.obj" | tail -1)"
     "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.ours.obj" --grid-scale "$r" -q
     "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.noflip.obj" --grid-scale "$r" --no-crease-flips -q
+    "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.paper.obj" --grid-scale "$r" --small-tets-both-ways -q
   done
 done
 "$py" "$here/score.py" "$out" "$src" "$bin/ponq-eval"

@@ -358,6 +358,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         stats.manifold = make_manifold(&cx, &mut labels);
     }
     stats.times.manifold = t4.elapsed();
+
     let t5 = Instant::now();
     let (mut mesh, back) = extract_boundary(&cx, &labels);
     let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();

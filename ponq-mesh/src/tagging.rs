@@ -1,7 +1,9 @@
 //! Step 2 of the mesher: tag the obvious inside / outside tets (SPEC section 6).
 //!
-//! A tet whose four vertices all see its circumcentre (and its barycentre) behind their
-//! oriented plane is inside; in front of all four, outside; otherwise unknown. Tets touching a
+//! A tet whose four vertices all see its circumcentre behind their oriented plane is inside
+//! (in front of all four: outside), unless its barycentre is on the other side on average (the
+//! mean of its signed distances to the four planes, each weighted by the length of the vertex's
+//! raw normal, as in the authors' code); otherwise unknown. Tets touching a
 //! protective corner are outside. Then every vertex that has a tagged tet but no inside tet
 //! gets its smallest unknown tet tagged inside, if that tet is small; with
 //! [`SmallTetRule::BothWays`] (the paper's text) a vertex without an outside tet gets one too.

@@ -1,7 +1,7 @@
 //! The tetrahedral complex the mesher works on: the Delaunay tetrahedralisation of the v*
-//! plus the eight protective corners, with the PoNQ data (unit normal and the length of the
-//! raw one, normalised quadric) attached to each vertex, and the inside / outside labels of
-//! the tets.
+//! plus the eight protective corners, with the PoNQ data (unit normal, the normal the tagging
+//! uses, normalised quadric) attached to each vertex, and the inside / outside labels of the
+//! tets.
 
 use crate::delaunay::{Delaunay, NONE};
 use crate::predicates::orient3d;
@@ -24,8 +24,9 @@ pub const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
 /// Delaunay tets with per-vertex PoNQ data.
 ///
-/// Invariants: `normals`, `normal_lengths`, `quadrics`, `protective` and `vertex_tet` have one
-/// entry per Delaunay vertex; normals are unit length or zero, normal lengths finite and >= 0; quadrics are normalised (largest
+/// Invariants: `normals`, `tag_normals`, `quadrics`, `protective` and `vertex_tet` have one
+/// entry per Delaunay vertex; normals are unit length or zero; each tag normal is its normal
+/// times a finite factor >= 0; quadrics are normalised (largest
 /// eigenvalue of `A` is 1, or `A = 0`); `vertex_tet[v]` is a tet containing `v` ([`NONE`] when
 /// no tet does).
 #[derive(Debug, Clone)]
@@ -34,10 +35,13 @@ pub struct TetComplex {
     pub dt: Delaunay,
     /// Unit normal per vertex (zero when unknown).
     pub normals: Vec<[f64; 3]>,
-    /// Length of each vertex's raw normal (the PoNQ's normal, not normalised: a mean of unit
-    /// normals, short where they disagree): the barycentre test of the tagging weighs each
-    /// vertex's plane by it, as the authors' mesher does ([`crate::tagging::tag_tet`]).
-    pub normal_lengths: Vec<f64>,
+    /// Each vertex's unit normal scaled to the length of its raw normal (the PoNQ's normal,
+    /// not normalised: a mean of unit normals, short where they disagree; for merged points,
+    /// the mean of their raw normals' length): the tagging's tests use it, so that the
+    /// barycentre test weighs each vertex's plane by that length, as the authors' mesher does
+    /// ([`crate::tagging::tag_tet`]). One array for both tests keeps the tagging's memory
+    /// traffic what it was with unit normals.
+    pub tag_normals: Vec<[f64; 3]>,
     /// Normalised quadric per vertex.
     pub quadrics: Vec<Quadric>,
     /// True for the protective corner points.
@@ -58,7 +62,7 @@ impl TetComplex {
     pub fn new(
         dt: Delaunay,
         normals: Vec<[f64; 3]>,
-        normal_lengths: Vec<f64>,
+        tag_normals: Vec<[f64; 3]>,
         quadrics: Vec<Quadric>,
         protective: Vec<bool>,
         cell_size: f64,
@@ -68,7 +72,7 @@ impl TetComplex {
         Self {
             dt,
             normals,
-            normal_lengths,
+            tag_normals,
             quadrics,
             protective,
             vertex_tet,
@@ -214,7 +218,7 @@ mod tests {
             let cx = TetComplex::new(
                 dt,
                 vec![[0.0; 3]; nv],
-                vec![0.0; nv],
+                vec![[0.0; 3]; nv],
                 vec![Quadric::zero(); nv],
                 vec![false; nv],
                 0.1,

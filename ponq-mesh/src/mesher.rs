@@ -276,21 +276,19 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         .map(|i| (dt.vertex_of_point[i], i as u32))
         .collect();
     merged.sort_by_key(|&(v, _)| v);
-    // Each vertex's unit normal, the length of its raw normal (the mean of its points' raw
-    // normals: the barycentre test of the tagging weighs by it, as the authors do) and its
+    // Each vertex's unit normal, its tagging normal (the unit normal at the length of the mean
+    // of its points' raw normals: the barycentre test weighs by it, as the authors do) and its
     // quadric.
-    let per_vertex: Vec<([f64; 3], f64, Quadric)> = {
+    #[allow(clippy::type_complexity)]
+    let (normals, (tag_normals, quadrics)): (Vec<[f64; 3]>, (Vec<[f64; 3]>, Vec<Quadric>)) = {
         use rayon::prelude::*;
         (0..nv)
             .into_par_iter()
             .map(|v| {
                 if corner[v] != u32::MAX {
                     let c = points[corner[v] as usize];
-                    return (
-                        unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]),
-                        1.0,
-                        Quadric::identity_at(c),
-                    );
+                    let n = unit([centre[0] - c[0], centre[1] - c[1], centre[2] - c[2]]);
+                    return (n, (n, Quadric::identity_at(c)));
                 }
                 let (mut n, mut raw, mut q) = ([0.0; 3], [0.0; 3], Quadric::zero());
                 let mut add = |i: usize| {
@@ -312,28 +310,24 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
                 let len = (raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2]).sqrt()
                     / f64::from(sources[v].max(1));
                 // A single normalised quadric is already normalised; a sum of several is not.
+                let n = unit(n);
+                let len = if len.is_finite() { len } else { 0.0 };
                 (
-                    unit(n),
-                    if len.is_finite() { len } else { 0.0 },
-                    if sources[v] > 1 { q.normalized() } else { q },
+                    n,
+                    (
+                        n.map(|x| x * len),
+                        if sources[v] > 1 { q.normalized() } else { q },
+                    ),
                 )
             })
-            .collect()
+            .unzip()
     };
-    let mut normals = Vec::with_capacity(nv);
-    let mut normal_lengths = Vec::with_capacity(nv);
-    let mut quadrics = Vec::with_capacity(nv);
-    for (n, l, q) in per_vertex {
-        normals.push(n);
-        normal_lengths.push(l);
-        quadrics.push(q);
-    }
     stats.vertices = nv;
     stats.tets = dt.tets.len();
     let cx = TetComplex::new(
         dt,
         normals,
-        normal_lengths,
+        tag_normals,
         quadrics,
         corner.iter().map(|&c| c != u32::MAX).collect(),
         cell,

@@ -28,7 +28,7 @@ pub fn tag_tet(cx: &TetComplex, t: u32) -> Label {
     };
     let count = tv
         .iter()
-        .filter(|&&v| dot_diff(cx.pos(v), &cc, &cx.normals[v as usize]) > 0.0)
+        .filter(|&&v| dot_diff(cx.pos(v), &cc, &cx.tag_normals[v as usize]) > 0.0)
         .count();
     let label = match count {
         4 => Label::Inside,
@@ -41,7 +41,7 @@ pub fn tag_tet(cx: &TetComplex, t: u32) -> Label {
     // normal (its points' normals disagree: a crease, a corner) counts less.
     let bary: f64 = tv
         .iter()
-        .map(|&v| dot_diff(&b, cx.pos(v), &cx.normals[v as usize]) * cx.normal_lengths[v as usize])
+        .map(|&v| dot_diff(&b, cx.pos(v), &cx.tag_normals[v as usize]))
         .sum::<f64>()
         / 4.0;
     match label {
@@ -169,11 +169,11 @@ mod tests {
     ) -> TetComplex {
         let dt = Delaunay::new(points).expect("finite points");
         let nv = dt.vertices.len();
-        let (mut n, mut l, mut p) = (vec![[0.0; 3]; nv], vec![0.0; nv], vec![false; nv]);
+        let (mut n, mut l, mut p) = (vec![[0.0; 3]; nv], vec![[0.0; 3]; nv], vec![false; nv]);
         for (i, &v) in dt.vertex_of_point.iter().enumerate() {
             let len = (normals[i].iter().map(|x| x * x).sum::<f64>()).sqrt();
             n[v as usize] = normals[i].map(|x| x / len);
-            l[v as usize] = lengths[i];
+            l[v as usize] = n[v as usize].map(|x| x * lengths[i]);
             p[v as usize] = protective[i];
         }
         TetComplex::new(dt, n, l, vec![Quadric::zero(); nv], p, 0.1, 1.0)

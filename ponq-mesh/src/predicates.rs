@@ -384,154 +384,16 @@ pub fn circumcenter(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> O
 /// common scale `2^k_min`; their differences (below `2^100`) are exact, and the determinant
 /// of [`insphere_bounded`] (degree 5 in them) is below `2^507`. Spans up to 61 bits (lattices
 /// and points away from the coordinate planes) run in native `i64` / `i128`, with 3- and
-/// 5-limb wrapping integers for the last two products; wider ones in sign-magnitude limbs whose
-/// products cost only the limbs in use. Why by hand: fixed-width big-integer crates
-/// (`bnum`, `crypto-bigint`) multiply at their full width, which would cost here about as
-/// much as the expansion arithmetic this replaces; the limb code is short and tested against
-/// `robust` and against itself (native vs wide).
+/// 5-limb wrapping integers for the last two products; wider ones in 4-, 5- and 8-limb
+/// wrapping integers, each stage in the width its values need. Why by hand: fixed-width
+/// big-integer crates (`bnum`, `crypto-bigint`) would do, but one width for every stage (512
+/// bits) costs several times the limb products of these graded widths; the few lines of
+/// two's-complement limb arithmetic are tested against `robust` and against themselves
+/// (native against limbs).
 mod fixed {
     /// Largest span (bits) of the coordinates handled here: differences below `2^(span+1)`,
     /// the determinant below `2^(5 span + 13)` < `2^511`.
     pub const MAX_SPAN: i32 = 99;
-
-    const LIMBS: usize = 8;
-
-    /// A signed integer below `2^511` in magnitude: sign and magnitude, little-endian limbs,
-    /// `len` limbs used (the others zero).
-    #[derive(Clone, Copy)]
-    pub(super) struct Wide {
-        neg: bool,
-        len: usize,
-        mag: [u64; LIMBS],
-    }
-
-    impl Wide {
-        pub(super) fn from_i128(x: i128) -> Self {
-            let m = x.unsigned_abs();
-            let mut mag = [0u64; LIMBS];
-            mag[0] = m as u64;
-            mag[1] = (m >> 64) as u64;
-            let mut w = Self {
-                neg: x < 0,
-                len: 2,
-                mag,
-            };
-            w.trim();
-            w
-        }
-
-        fn trim(&mut self) {
-            while self.len > 0 && self.mag[self.len - 1] == 0 {
-                self.len -= 1;
-            }
-            if self.len == 0 {
-                self.neg = false;
-            }
-        }
-
-        pub(super) fn signum(&self) -> i32 {
-            if self.len == 0 {
-                0
-            } else if self.neg {
-                -1
-            } else {
-                1
-            }
-        }
-
-        pub(super) fn mul(&self, o: &Self) -> Self {
-            let mut mag = [0u64; LIMBS];
-            for i in 0..self.len {
-                let mut carry = 0u128;
-                let a = self.mag[i] as u128;
-                for j in 0..o.len {
-                    // i + j < LIMBS: the operands' magnitudes multiply to below 2^511.
-                    let t = a * o.mag[j] as u128 + mag[i + j] as u128 + carry;
-                    mag[i + j] = t as u64;
-                    carry = t >> 64;
-                }
-                if i + o.len < LIMBS {
-                    mag[i + o.len] = carry as u64;
-                }
-            }
-            let mut w = Self {
-                neg: self.neg != o.neg,
-                len: (self.len + o.len).min(LIMBS),
-                mag,
-            };
-            w.trim();
-            w
-        }
-
-        /// `|a| >= |b|`.
-        fn mag_ge(a: &Self, b: &Self) -> bool {
-            if a.len != b.len {
-                return a.len > b.len;
-            }
-            for i in (0..a.len).rev() {
-                if a.mag[i] != b.mag[i] {
-                    return a.mag[i] > b.mag[i];
-                }
-            }
-            true
-        }
-
-        pub(super) fn add(&self, o: &Self) -> Self {
-            if self.neg == o.neg {
-                let n = self.len.max(o.len);
-                let mut mag = [0u64; LIMBS];
-                let mut carry = 0u64;
-                for (i, m) in mag.iter_mut().enumerate().take(n) {
-                    let (s1, c1) = self.mag[i].overflowing_add(o.mag[i]);
-                    let (s2, c2) = s1.overflowing_add(carry);
-                    *m = s2;
-                    carry = (c1 | c2) as u64;
-                }
-                let mut len = n;
-                if carry != 0 && n < LIMBS {
-                    mag[n] = carry;
-                    len += 1;
-                }
-                let mut w = Self {
-                    neg: self.neg,
-                    len,
-                    mag,
-                };
-                w.trim();
-                w
-            } else {
-                // Different signs: the larger magnitude minus the smaller one.
-                let (big, small) = if Self::mag_ge(self, o) {
-                    (self, o)
-                } else {
-                    (o, self)
-                };
-                let mut mag = [0u64; LIMBS];
-                let mut borrow = 0u64;
-                for (i, m) in mag.iter_mut().enumerate().take(big.len) {
-                    let (d1, b1) = big.mag[i].overflowing_sub(small.mag[i]);
-                    let (d2, b2) = d1.overflowing_sub(borrow);
-                    *m = d2;
-                    borrow = (b1 | b2) as u64;
-                }
-                let mut w = Self {
-                    neg: big.neg,
-                    len: big.len,
-                    mag,
-                };
-                w.trim();
-                w
-            }
-        }
-
-        pub(super) fn sub(&self, o: &Self) -> Self {
-            let mut n = *o;
-            if n.len > 0 {
-                n.neg = !n.neg;
-            }
-            self.add(&n)
-        }
-    }
 
     /// Largest span (bits) of the native-width path: differences below `2^62` (i64), their
     /// 2x2 minors and lifts below `2^126` (i128).
@@ -539,9 +401,9 @@ mod fixed {
 
     /// Two's-complement integers of `N` 64-bit limbs, little-endian, wrapping: exact for
     /// values below `2^(64 N - 1)` in magnitude.
-    type Fixed<const N: usize> = [u64; N];
+    pub(super) type Fixed<const N: usize> = [u64; N];
 
-    fn fixed_from_i128<const N: usize>(x: i128) -> Fixed<N> {
+    pub(super) fn fixed_from_i128<const N: usize>(x: i128) -> Fixed<N> {
         let ext = if x < 0 { u64::MAX } else { 0 };
         std::array::from_fn(|i| match i {
             0 => x as u64,
@@ -550,7 +412,7 @@ mod fixed {
         })
     }
 
-    fn fixed_add<const N: usize>(a: &Fixed<N>, b: &Fixed<N>) -> Fixed<N> {
+    pub(super) fn fixed_add<const N: usize>(a: &Fixed<N>, b: &Fixed<N>) -> Fixed<N> {
         let mut out = [0u64; N];
         let mut carry = false;
         for i in 0..N {
@@ -562,7 +424,7 @@ mod fixed {
         out
     }
 
-    fn fixed_neg<const N: usize>(a: &Fixed<N>) -> Fixed<N> {
+    pub(super) fn fixed_neg<const N: usize>(a: &Fixed<N>) -> Fixed<N> {
         let mut out = [0u64; N];
         let mut carry = true;
         for i in 0..N {
@@ -573,8 +435,18 @@ mod fixed {
         out
     }
 
+    pub(super) fn fixed_sub<const N: usize>(a: &Fixed<N>, b: &Fixed<N>) -> Fixed<N> {
+        fixed_add(a, &fixed_neg(b))
+    }
+
+    /// The same value in `N >= M` limbs (sign-extended).
+    pub(super) fn fixed_widen<const M: usize, const N: usize>(a: &Fixed<M>) -> Fixed<N> {
+        let ext = if a[M - 1] >> 63 == 1 { u64::MAX } else { 0 };
+        std::array::from_fn(|i| if i < M { a[i] } else { ext })
+    }
+
     /// `a b` modulo `2^(64 N)` (schoolbook, only the limbs below `N`).
-    fn fixed_mul<const N: usize>(a: &Fixed<N>, b: &Fixed<N>) -> Fixed<N> {
+    pub(super) fn fixed_mul<const N: usize>(a: &Fixed<N>, b: &Fixed<N>) -> Fixed<N> {
         let mut out = [0u64; N];
         for i in 0..N {
             let mut carry = 0u128;
@@ -587,7 +459,7 @@ mod fixed {
         out
     }
 
-    fn fixed_signum<const N: usize>(a: &Fixed<N>) -> i32 {
+    pub(super) fn fixed_signum<const N: usize>(a: &Fixed<N>) -> i32 {
         if a[N - 1] >> 63 == 1 {
             -1
         } else if a.iter().any(|&x| x != 0) {
@@ -621,14 +493,11 @@ mod fixed {
         let abd = tri(zm(0, bd), zm(1, ad), zm(3, ab));
         let acd = tri(zm(0, cd), zm(2, ad), zm(3, ac));
         let bcd = tri(zm(1, cd), zm(2, bd), zm(3, bc));
-        let widen = |t: Fixed<3>| -> Fixed<5> {
-            let ext = if t[2] >> 63 == 1 { u64::MAX } else { 0 };
-            [t[0], t[1], t[2], ext, ext]
-        };
-        let term = |l: i128, t: Fixed<3>| fixed_mul(&fixed_from_i128::<5>(l), &widen(t));
+        let term =
+            |l: i128, t: Fixed<3>| fixed_mul(&fixed_from_i128::<5>(l), &fixed_widen::<3, 5>(&t));
         let det = fixed_add(
-            &fixed_add(&term(lift(3), abc), &fixed_neg(&term(lift(2), abd))),
-            &fixed_add(&term(lift(1), acd), &fixed_neg(&term(lift(0), bcd))),
+            &fixed_sub(&term(lift(3), abc), &term(lift(2), abd)),
+            &fixed_sub(&term(lift(1), acd), &term(lift(0), bcd)),
         );
         -fixed_signum(&det)
     }
@@ -696,40 +565,39 @@ mod fixed {
         })
     }
 
-    /// [`insphere_sign`] for integer points whose differences are below `2^100`, in
-    /// [`Wide`] integers.
+    /// [`insphere_sign`] for integer points whose differences are below `2^100` (i128): 2x2
+    /// minors and lifts (below `2^202`) in 4 limbs, 3x3 minors (below `2^303`) in 5, the
+    /// determinant (below `2^507`) in 8.
     pub(super) fn insphere_sign_wide(q: &[[i128; 3]; 5]) -> i32 {
-        let diff =
-            |i: usize| -> [Wide; 3] { std::array::from_fn(|k| Wide::from_i128(q[i][k] - q[4][k])) };
-        let [ax, ay, az] = diff(0);
-        let [bx, by, bz] = diff(1);
-        let [cx, cy, cz] = diff(2);
-        let [dx, dy, dz] = diff(3);
-        // The same expression as `insphere_bounded`, evaluated exactly.
-        let lift = |x: &Wide, y: &Wide, z: &Wide| x.mul(x).add(&y.mul(y)).add(&z.mul(z));
-        let (a2, b2, c2, d2) = (
-            lift(&ax, &ay, &az),
-            lift(&bx, &by, &bz),
-            lift(&cx, &cy, &cz),
-            lift(&dx, &dy, &dz),
+        let d: [[Fixed<4>; 3]; 4] =
+            std::array::from_fn(|i| std::array::from_fn(|k| fixed_from_i128(q[i][k] - q[4][k])));
+        let m = |i: usize, j: usize| -> Fixed<4> {
+            fixed_sub(
+                &fixed_mul(&d[i][0], &d[j][1]),
+                &fixed_mul(&d[j][0], &d[i][1]),
+            )
+        };
+        let lift = |i: usize| -> Fixed<8> {
+            let [x, y, z] = d[i].map(|v| fixed_mul(&v, &v));
+            fixed_widen(&fixed_add(&fixed_add(&x, &y), &z))
+        };
+        let (ab, ac, ad, bc, bd, cd) = (m(0, 1), m(0, 2), m(0, 3), m(1, 2), m(1, 3), m(2, 3));
+        // z_i * minor, as 5 limbs.
+        let zm = |i: usize, minor: Fixed<4>| -> Fixed<5> {
+            fixed_mul(&fixed_widen(&d[i][2]), &fixed_widen(&minor))
+        };
+        let tri = |p: Fixed<5>, n: Fixed<5>, r: Fixed<5>| fixed_add(&fixed_sub(&p, &n), &r);
+        let abc = tri(zm(0, bc), zm(1, ac), zm(2, ab));
+        let abd = tri(zm(0, bd), zm(1, ad), zm(3, ab));
+        let acd = tri(zm(0, cd), zm(2, ad), zm(3, ac));
+        let bcd = tri(zm(1, cd), zm(2, bd), zm(3, bc));
+        let term = |l: Fixed<8>, t: Fixed<5>| fixed_mul(&l, &fixed_widen(&t));
+        let det = fixed_add(
+            &fixed_sub(&term(lift(3), abc), &term(lift(2), abd)),
+            &fixed_sub(&term(lift(1), acd), &term(lift(0), bcd)),
         );
-        let minor = |px: &Wide, py: &Wide, qx: &Wide, qy: &Wide| px.mul(qy).sub(&qx.mul(py));
-        let ab = minor(&ax, &ay, &bx, &by);
-        let ac = minor(&ax, &ay, &cx, &cy);
-        let ad = minor(&ax, &ay, &dx, &dy);
-        let bc = minor(&bx, &by, &cx, &cy);
-        let bd = minor(&bx, &by, &dx, &dy);
-        let cd = minor(&cx, &cy, &dx, &dy);
-        let abc = az.mul(&bc).sub(&bz.mul(&ac)).add(&cz.mul(&ab));
-        let abd = az.mul(&bd).sub(&bz.mul(&ad)).add(&dz.mul(&ab));
-        let acd = az.mul(&cd).sub(&cz.mul(&ad)).add(&dz.mul(&ac));
-        let bcd = bz.mul(&cd).sub(&cz.mul(&bd)).add(&dz.mul(&bc));
-        let det = d2
-            .mul(&abc)
-            .sub(&c2.mul(&abd))
-            .add(&b2.mul(&acd).sub(&a2.mul(&bcd)));
         // Negative when e is inside: see `insphere_bounded`.
-        -det.signum()
+        -fixed_signum(&det)
     }
 }
 
@@ -987,7 +855,7 @@ mod tests {
         check(tiny, false, &mut decided);
     }
 
-    /// The native-width path and the [`fixed::Wide`] path agree on integer points whose
+    /// The native-width path and the limb path agree on integer points whose
     /// differences fit both (up to 2^62), generic and co-spherical.
     #[test]
     fn native_and_wide_integer_paths_agree() {
@@ -1016,27 +884,37 @@ mod tests {
     /// limbs.
     #[test]
     fn wide_integers_add_subtract_and_multiply_exactly() {
+        use fixed::{Fixed, fixed_add, fixed_mul, fixed_signum, fixed_sub};
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let w = fixed::Wide::from_i128;
+        let w = fixed::fixed_from_i128::<8>;
+        let sg = |x: Fixed<8>| fixed_signum(&x);
         for _ in 0..20000 {
             let bits = rng.random_range(1..62);
             let x: i128 = rng.random_range(-(1i128 << bits)..(1i128 << bits));
             let y: i128 = rng.random_range(-(1i128 << bits)..(1i128 << bits));
-            assert_eq!(w(x).add(&w(y)).signum(), (x + y).signum() as i32);
-            assert_eq!(w(x).sub(&w(y)).signum(), (x - y).signum() as i32);
-            assert_eq!(w(x).mul(&w(y)).signum(), (x * y).signum() as i32);
+            assert_eq!(sg(fixed_add(&w(x), &w(y))), (x + y).signum() as i32);
+            assert_eq!(sg(fixed_sub(&w(x), &w(y))), (x - y).signum() as i32);
+            assert_eq!(sg(fixed_mul(&w(x), &w(y))), (x * y).signum() as i32);
             // (x y) - (x y) = 0 and x y + (-x) y = 0 through the wide path.
-            let xy = w(x).mul(&w(y));
-            assert_eq!(xy.sub(&w(x * y)).signum(), 0);
-            assert_eq!(xy.add(&w(-x).mul(&w(y))).signum(), 0);
+            let xy = fixed_mul(&w(x), &w(y));
+            assert_eq!(sg(fixed_sub(&xy, &w(x * y))), 0);
+            assert_eq!(sg(fixed_add(&xy, &fixed_mul(&w(-x), &w(y)))), 0);
         }
         // (2^100 - 1)^2 = 2^200 - 2^101 + 1: compare with the sum of its parts.
         let m = w((1i128 << 100) - 1);
-        let sq = m.mul(&m);
+        let sq = fixed_mul(&m, &m);
         let two100 = w(1i128 << 100);
-        let parts = two100.mul(&two100).sub(&two100.mul(&w(2))).add(&w(1));
-        assert_eq!(sq.sub(&parts).signum(), 0);
-        assert_eq!(sq.sub(&parts.add(&w(1))).signum(), -1);
+        let parts = fixed_add(
+            &fixed_sub(&fixed_mul(&two100, &two100), &fixed_mul(&two100, &w(2))),
+            &w(1),
+        );
+        assert_eq!(sg(fixed_sub(&sq, &parts)), 0);
+        assert_eq!(sg(fixed_sub(&sq, &fixed_add(&parts, &w(1)))), -1);
+        // Negative products near the top of the width: -(2^250) * 2^250 = -2^500.
+        let big = fixed_mul(&w(1i128 << 125), &w(1i128 << 125));
+        let neg = fixed_mul(&fixed_sub(&w(0), &big), &big);
+        assert_eq!(sg(neg), -1);
+        assert_eq!(sg(fixed_add(&neg, &fixed_mul(&big, &big))), 0);
     }
 }

@@ -319,23 +319,13 @@ fn flip_pass(
         return Vec::new();
     };
     let mut flipped = Vec::new();
-    // The first pass: every edge, with its half-edge.
-    let first: Vec<u32> = st.he.sorted_edges(&mesh.faces);
-    let mut base: Vec<(u32, u32)> = first
-        .iter()
-        .map(|&h| {
-            (
-                HalfEdges::origin(&mesh.faces, h),
-                HalfEdges::target(&mesh.faces, h),
-            )
-        })
-        .collect();
-    let mut first = Some(first);
+    // Edges to look at in the coming pass, sorted; `None` in the first pass: every edge.
+    let mut base: Option<Vec<(u32, u32)>> = None;
     stats.passes = 0;
     for _ in 0..MAX_PASSES {
         stats.passes += 1;
         let mut changed = false;
-        // Edges for this pass: `base` (sorted) merged with `extra` (added during the pass).
+        // Edges for this pass: `cands` (sorted) merged with `extra` (added during the pass).
         let mut extra: std::collections::BTreeSet<(u32, u32)> = Default::default();
         let mut next: Vec<(u32, u32)> = Vec::new();
         // The first change of an edge in this pass: `true` if it was removed (so it existed
@@ -349,14 +339,26 @@ fn flip_pass(
             use rayon::prelude::*;
             let st = &st;
             let mesh = &*mesh;
-            match first.take() {
-                Some(hs) if st.banned.is_empty() => hs
-                    .par_iter()
-                    .zip(&base)
-                    .filter(|&(&h, _)| st.may_flip_at(mesh, h))
-                    .map(|(_, &e)| e)
-                    .collect(),
-                _ => base
+            match base.take() {
+                // The first pass: every edge once, as its half-edge from the smaller vertex
+                // (the mesh is closed: the other half-edge goes the other way), in face
+                // order; only the few that pass are sorted (not the whole edge list).
+                None => {
+                    let faces = &mesh.faces;
+                    let mut c: Vec<(u32, u32)> = (0..faces.len() as u32 * 3)
+                        .into_par_iter()
+                        .filter_map(|h| {
+                            let e = (HalfEdges::origin(faces, h), HalfEdges::target(faces, h));
+                            let keep = e.0 < e.1
+                                && (st.banned.is_empty() || !st.banned.contains(&e))
+                                && st.may_flip_at(mesh, h);
+                            keep.then_some(e)
+                        })
+                        .collect();
+                    c.sort_unstable();
+                    c
+                }
+                Some(b) => b
                     .par_iter()
                     .copied()
                     .filter(|&e| st.may_flip(mesh, e))
@@ -409,7 +411,7 @@ fn flip_pass(
         }
         next.sort_unstable();
         next.dedup();
-        base = next;
+        base = Some(next);
     }
     flipped
 }

@@ -205,6 +205,45 @@ fn cli_meshes_the_shipped_example() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The same file, byte for byte, with one worker thread and with three (the Delaunay's
+/// canonical order and deterministic later stages), crease flips on and off.
+#[test]
+fn cli_output_does_not_depend_on_the_thread_count() {
+    let dir = std::env::temp_dir().join(format!("ponq-cli-threads-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for extra in [&[][..], &["--no-crease-flips"][..]] {
+        let mut files = Vec::new();
+        for threads in ["1", "3"] {
+            let out = dir.join(format!("t{threads}.obj"));
+            let o = bin()
+                .arg(example("example001_ponq_64.npz"))
+                .arg("-o")
+                .arg(&out)
+                .args(["--grid-scale", "64", "--threads", threads, "--no-check"])
+                .args(extra)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let stdout = String::from_utf8_lossy(&o.stdout);
+            assert!(
+                stdout.contains(&format!("; {threads} worker threads")),
+                "{stdout}"
+            );
+            files.push(std::fs::read(&out).unwrap());
+        }
+        assert!(files[0].len() > 1000);
+        assert!(files[0] == files[1], "{extra:?}: the meshes differ");
+    }
+    let o = bin()
+        .arg(example("csg_ponq_32.npz"))
+        .args(["-o", dir.join("z.obj").to_str().unwrap(), "--threads", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--threads"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn cli_bad_input_is_a_clear_error() {
     let dir = std::env::temp_dir().join(format!("ponq-cli-bad-{}", std::process::id()));

@@ -71,12 +71,25 @@ struct Args {
     /// Skip the exact validity check of the output (it is cheap; on by default).
     #[arg(long)]
     no_check: bool,
+    /// Worker threads [default: all cores]. The mesh is the same for any count (the
+    /// Delaunay output is put in a canonical order; the later stages are deterministic).
+    #[arg(long)]
+    threads: Option<usize>,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
 }
 
 fn run(args: &Args) -> Result<bool> {
+    if let Some(t) = args.threads {
+        if t == 0 {
+            bail!("--threads must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
     if let Some(t) = args.open {
         MeshingOptions::check_open_threshold(t).context("--open")?;
     }
@@ -142,7 +155,7 @@ fn run(args: &Args) -> Result<bool> {
             println!("note: {msg}");
         }
         println!(
-            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips",
+            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips; {} worker threads",
             s.tets,
             s.tagged[0],
             s.tagged[1],
@@ -150,7 +163,8 @@ fn run(args: &Args) -> Result<bool> {
             s.cut.nodes,
             s.cut.edges,
             s.manifold.flipped_tets,
-            s.flips.flips
+            s.flips.flips,
+            rayon::current_num_threads()
         );
         println!(
             "time (ms): read {:.1}, prepare {:.1}, delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}, write {:.1}; meshing total {:.1}",

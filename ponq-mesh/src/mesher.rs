@@ -358,9 +358,9 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
     if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
         let t = Instant::now();
-        let q: Vec<Quadric> = back.iter().map(|&v| cx.quadrics[v as usize]).collect();
-        let n: Vec<[f64; 3]> = back.iter().map(|&v| cx.normals[v as usize]).collect();
-        stats.flips = crate::flips::align_creases(&mut mesh, &q, &n, cx.h);
+        // The mesh vertices' data through `back`, not gathered into new arrays.
+        stats.flips =
+            crate::flips::align_creases_indexed(&mut mesh, &cx.quadrics, &cx.normals, &back, cx.h);
         stats.times.flips = t.elapsed();
     }
     if let Some(th) = opts.open_threshold {

@@ -681,6 +681,45 @@ mod tests {
         (pts, nrm)
     }
 
+    /// A rotated box's PoNQ on a `grid`^3 grid, meshed without flips, with each mesh vertex's
+    /// normalised quadric and unit normal (gathered from its source point).
+    fn unflipped_box(
+        grid: usize,
+        angle: f64,
+        samples: usize,
+        seed: u64,
+    ) -> (TriMesh, Vec<Quadric>, Vec<[f64; 3]>) {
+        let (pts, nrm) = rotated_box([0.55, 0.4, 0.3], angle, samples, seed);
+        let cell = |p: &[f64; 3]| {
+            let c =
+                |x: f64| (((x + 1.0) / 2.0 * grid as f64).floor().max(0.0) as usize).min(grid - 1);
+            ((c(p[0]) * grid + c(p[1])) * grid + c(p[2])) as u32
+        };
+        let ids: Vec<u32> = pts.iter().map(cell).collect();
+        let (ponq, _) = Ponq::from_clusters(&pts, &nrm, &ids, grid * grid * grid).unwrap();
+        let opts = MeshingOptions {
+            grid_scale: grid as f64,
+            align_creases: false,
+            ..Default::default()
+        };
+        let out = mesh_ponq(&ponq, &opts).unwrap();
+        let q: Vec<Quadric> = out
+            .source_point
+            .iter()
+            .map(|&s| ponq.quadrics[s as usize].normalized())
+            .collect();
+        let n: Vec<[f64; 3]> = out
+            .source_point
+            .iter()
+            .map(|&s| {
+                let m = ponq.normals[s as usize];
+                let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt().max(1e-30);
+                m.map(|x| x / l)
+            })
+            .collect();
+        (out.mesh, q, n)
+    }
+
     /// The work-list pass flips exactly what plain sweeps over all edges flip (same faces,
     /// same flips in the same order, same pass count), with and without banned edges, on
     /// meshes of rotated boxes where flips happen over several passes.
@@ -694,45 +733,17 @@ mod tests {
             (3, 20, 1.1),
             (4, 12, 0.45),
         ] {
-            let (pts, nrm) = rotated_box([0.55, 0.4, 0.3], angle, 40_000, seed);
-            let cell = |p: &[f64; 3]| {
-                let c = |x: f64| {
-                    (((x + 1.0) / 2.0 * grid as f64).floor().max(0.0) as usize).min(grid - 1)
-                };
-                ((c(p[0]) * grid + c(p[1])) * grid + c(p[2])) as u32
-            };
-            let ids: Vec<u32> = pts.iter().map(cell).collect();
-            let (ponq, _) = Ponq::from_clusters(&pts, &nrm, &ids, grid * grid * grid).unwrap();
-            let opts = MeshingOptions {
-                grid_scale: grid as f64,
-                align_creases: false,
-                ..Default::default()
-            };
-            let out = mesh_ponq(&ponq, &opts).unwrap();
-            let q: Vec<Quadric> = out
-                .source_point
-                .iter()
-                .map(|&s| ponq.quadrics[s as usize].normalized())
-                .collect();
-            let n: Vec<[f64; 3]> = out
-                .source_point
-                .iter()
-                .map(|&s| {
-                    let m = ponq.normals[s as usize];
-                    let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt().max(1e-30);
-                    m.map(|x| x / l)
-                })
-                .collect();
+            let (mesh, q, n) = unflipped_box(grid, angle, 40_000, seed);
             let h = (grid * grid) as f64;
             let mut banned_sets = vec![FxHashSet::default()];
-            let every_7th: FxHashSet<(u32, u32)> = reference::edge_faces(&out.mesh)
+            let every_7th: FxHashSet<(u32, u32)> = reference::edge_faces(&mesh)
                 .keys()
                 .copied()
                 .filter(|e| (e.0 + 3 * e.1) % 7 == 0)
                 .collect();
             banned_sets.push(every_7th);
             for banned in &banned_sets {
-                let (mut m1, mut m2) = (out.mesh.clone(), out.mesh.clone());
+                let (mut m1, mut m2) = (mesh.clone(), mesh.clone());
                 let (mut s1, mut s2) = (FlipStats::default(), FlipStats::default());
                 let data = VertexData {
                     quadrics: &q,
@@ -763,35 +774,8 @@ mod tests {
     #[test]
     fn indexed_data_flips_like_gathered_data() {
         let grid = 20usize;
-        let (pts, nrm) = rotated_box([0.55, 0.4, 0.3], 0.7, 30_000, 9);
-        let cell = |p: &[f64; 3]| {
-            let c =
-                |x: f64| (((x + 1.0) / 2.0 * grid as f64).floor().max(0.0) as usize).min(grid - 1);
-            ((c(p[0]) * grid + c(p[1])) * grid + c(p[2])) as u32
-        };
-        let ids: Vec<u32> = pts.iter().map(cell).collect();
-        let (ponq, _) = Ponq::from_clusters(&pts, &nrm, &ids, grid * grid * grid).unwrap();
-        let opts = MeshingOptions {
-            grid_scale: grid as f64,
-            align_creases: false,
-            ..Default::default()
-        };
-        let out = mesh_ponq(&ponq, &opts).unwrap();
-        let nv = out.mesh.vertices.len();
-        let q: Vec<Quadric> = out
-            .source_point
-            .iter()
-            .map(|&s| ponq.quadrics[s as usize].normalized())
-            .collect();
-        let n: Vec<[f64; 3]> = out
-            .source_point
-            .iter()
-            .map(|&s| {
-                let m = ponq.normals[s as usize];
-                let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt().max(1e-30);
-                m.map(|x| x / l)
-            })
-            .collect();
+        let (mesh, q, n) = unflipped_box(grid, 0.7, 30_000, 9);
+        let nv = mesh.vertices.len();
         // Vertex w's data at slot index[w] of arrays twice as long (the rest is junk).
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         let mut slots: Vec<u32> = (0..2 * nv as u32).collect();
@@ -806,19 +790,19 @@ mod tests {
             n2[i as usize] = n[w];
         }
         let h = (grid * grid) as f64;
-        let (mut m1, mut m2) = (out.mesh.clone(), out.mesh.clone());
+        let (mut m1, mut m2) = (mesh.clone(), mesh.clone());
         let s1 = align_creases(&mut m1, &q, &n, h);
         let s2 = align_creases_indexed(&mut m2, &q2, &n2, &index, h);
         assert!(s1.flips > 10, "only {} flips", s1.flips);
         assert_eq!(s1, s2);
         assert_eq!(m1.faces, m2.faces);
         for bad in [&index[1..], &[u32::MAX; 1][..]] {
-            let mut m3 = out.mesh.clone();
+            let mut m3 = mesh.clone();
             let mut bad = bad.to_vec();
             bad.resize(if bad.len() == 1 { nv } else { bad.len() }, 0);
             let s3 = align_creases_indexed(&mut m3, &q2, &n2, &bad, h);
             assert_eq!(s3, FlipStats::default());
-            assert_eq!(m3.faces, out.mesh.faces);
+            assert_eq!(m3.faces, mesh.faces);
         }
     }
 }

@@ -50,6 +50,7 @@ fn infer_reconstructs_a_valid_box_with_the_shipped_model() {
         vec!["--tile", "5"],
         vec!["--merge-smooth", "0"],
         vec!["--small-tets-both-ways"],
+        vec!["--small-tets", "authors"],
     ] {
         let o = Command::new(infer_exe())
             .arg(d.join("box.npy"))

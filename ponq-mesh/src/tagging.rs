@@ -6,7 +6,8 @@
 //! raw normal, as in the authors' code); otherwise unknown. Tets touching a
 //! protective corner are outside. Then every vertex that has a tagged tet but no inside tet
 //! gets its smallest unknown tet tagged inside, if that tet is small; with
-//! [`SmallTetRule::BothWays`] (the paper's text) a vertex without an outside tet gets one too.
+//! [`SmallTetRule::BothWays`] (the paper's text) a vertex without an outside tet gets one too;
+//! [`SmallTetRule::Authors`] is the authors' code to the letter (smallest of all tets).
 
 use crate::complex::{Label, TetComplex};
 use crate::predicates::circumcenter;
@@ -67,6 +68,31 @@ pub enum SmallTetRule {
     /// Vertices without an outside tet get one as well (the paper's text; the mesher's rule
     /// before 2026-12-03).
     BothWays,
+    /// The authors' code to the letter: which vertices lack an inside tet is read once, before
+    /// the rule, and such a vertex (with an outside tet) gets the smallest of *all* its tets
+    /// tagged inside, whatever that tet's label (an outside tet may turn inside), if it is
+    /// small. The result does not depend on the order of the vertices.
+    Authors,
+}
+
+impl SmallTetRule {
+    /// The names the command lines take: `inside`, `both`, `authors`.
+    pub const NAMES: [&'static str; 3] = ["inside", "both", "authors"];
+}
+
+impl std::str::FromStr for SmallTetRule {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "inside" => Ok(Self::InsideOnly),
+            "both" => Ok(Self::BothWays),
+            "authors" => Ok(Self::Authors),
+            _ => Err(format!(
+                "unknown small-tet rule `{s}` (expected one of: {})",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
 }
 
 /// Tags every tet, then applies the small-tet rule (`rule`) with threshold
@@ -119,11 +145,30 @@ pub fn tag_all(cx: &TetComplex, small_factor: f64, rule: SmallTetRule) -> Vec<La
             let has = has_labels[v as usize];
             !cx.protective[v as usize]
                 && match rule {
-                    SmallTetRule::InsideOnly => has == 2,
+                    SmallTetRule::InsideOnly | SmallTetRule::Authors => has == 2,
                     SmallTetRule::BothWays => has != 3,
                 }
         })
         .collect();
+    if rule == SmallTetRule::Authors {
+        // Static flags and "smallest of all tets": each candidate's choice is independent of
+        // the others, so they are found in parallel (ties: the lowest tet index).
+        let chosen: Vec<u32> = candidates
+            .par_iter()
+            .filter_map(|&v| {
+                cx.incident(v)
+                    .into_iter()
+                    .map(|t| (cx.size(t), t))
+                    .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+                    .filter(|&(s, _)| s < threshold)
+                    .map(|(_, t)| t)
+            })
+            .collect();
+        for t in chosen {
+            labels[t as usize] = Label::Inside;
+        }
+        return labels;
+    }
     for v in candidates {
         let inc = cx.incident(v);
         let has = |l: Label, labels: &[Label]| inc.iter().any(|&t| labels[t as usize] == l);
@@ -275,5 +320,103 @@ mod tests {
         }
         // The option matters: the paper's rule does add outside tets on these spheres.
         assert!(added_outside > 0);
+    }
+
+    /// `n` random points in the unit cube with random normals, inside eight protective corners.
+    fn cloud(n: usize, seed: u64) -> TetComplex {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut points: Vec<[f64; 3]> = (0..n)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+            .collect();
+        let mut normals: Vec<[f64; 3]> = (0..n)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+            .collect();
+        for i in 0..8 {
+            points.push(std::array::from_fn(|k| {
+                if i >> k & 1 == 0 { -2.0 } else { 2.0 }
+            }));
+            normals.push(std::array::from_fn(|k| {
+                if i >> k & 1 == 0 { 1.0 } else { -1.0 }
+            }));
+        }
+        let lengths = vec![1.0; n + 8];
+        let protective: Vec<bool> = (0..n + 8).map(|i| i >= n).collect();
+        complex(&points, &normals, &lengths, &protective)
+    }
+
+    /// The authors' `add_void_vertices`, transcribed literally (numpy's mask-and-argmin over
+    /// the whole tet list, no star walk): a reference for [`SmallTetRule::Authors`].
+    fn authors_literal(cx: &TetComplex, plain: &[Label], threshold: f64) -> Vec<Label> {
+        let nv = cx.dt.vertices.len();
+        let (mut has_out, mut has_in) = (vec![false; nv], vec![false; nv]);
+        for (tv, &l) in cx.dt.tets.iter().zip(plain) {
+            for &v in tv {
+                has_out[v as usize] |= l == Label::Outside;
+                has_in[v as usize] |= l == Label::Inside;
+            }
+        }
+        let mut labels = plain.to_vec();
+        for v in 0..nv as u32 {
+            let (i, p) = (v as usize, cx.protective[v as usize]);
+            // `void_points` are the vertices lacking either kind; those lacking an outside tet
+            // are skipped (`if lack_outside[i] and lack_outside[i]: pass`).
+            if p || has_in[i] || !has_out[i] {
+                continue;
+            }
+            let mut best: Option<(f64, usize)> = None;
+            for (t, tv) in cx.dt.tets.iter().enumerate() {
+                let s = cx.size(t as u32);
+                if tv.contains(&v) && best.is_none_or(|(b, _)| s < b) {
+                    best = Some((s, t));
+                }
+            }
+            if let Some((s, t)) = best
+                && s < threshold
+            {
+                labels[t] = Label::Inside;
+            }
+        }
+        labels
+    }
+
+    #[test]
+    fn authors_rule_matches_a_literal_transcription_of_their_code() {
+        let (mut flipped_tagged, mut differs_from_default) = (0, false);
+        for seed in 0..6 {
+            // Spheres, and random clouds with random normals (where a vertex's smallest tet
+            // is often a tagged one).
+            let cx = if seed % 2 == 0 {
+                sphere(200, seed)
+            } else {
+                cloud(300, seed)
+            };
+            let plain: Vec<Label> = (0..cx.n_tets() as u32).map(|t| tag_tet(&cx, t)).collect();
+            for factor in [0.05, 1e6] {
+                let threshold = factor * cx.cell_size * cx.cell_size;
+                let ours = tag_all(&cx, factor, SmallTetRule::Authors);
+                let reference = authors_literal(&cx, &plain, threshold);
+                let wrong = ours.iter().zip(&reference).filter(|(a, b)| a != b).count();
+                assert_eq!(
+                    wrong, 0,
+                    "seed {seed}, factor {factor}: tets tagged differently"
+                );
+                // Unlike the default rule, it may re-tag a tagged tet (outside -> inside).
+                flipped_tagged += ours
+                    .iter()
+                    .zip(&plain)
+                    .filter(|&(&o, &p)| o != p && p == Label::Outside)
+                    .count();
+                differs_from_default |= ours != tag_all(&cx, factor, SmallTetRule::InsideOnly);
+            }
+        }
+        assert!(
+            flipped_tagged > 0,
+            "no outside tet was re-tagged: the test shows nothing"
+        );
+        assert!(
+            differs_from_default,
+            "the same labels as the default rule everywhere"
+        );
     }
 }

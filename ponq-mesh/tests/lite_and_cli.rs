@@ -350,3 +350,51 @@ fn cli_bad_input_is_a_clear_error() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn cli_small_tet_rules_by_name() {
+    let dir = std::env::temp_dir().join(format!("ponq-cli-rules-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.join(format!("{name}.obj"));
+        let o = bin()
+            .arg(example("csg_ponq_32.npz"))
+            .arg("-o")
+            .arg(&out)
+            .args(["--grid-scale", "32"])
+            .args(extra)
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let mut files = Vec::new();
+    for (name, extra) in [
+        ("both", vec!["--small-tets", "both"]),
+        ("both_old_flag", vec!["--small-tets-both-ways"]),
+        ("authors", vec!["--small-tets", "authors"]),
+        ("inside", vec!["--small-tets", "inside"]),
+        ("default", vec![]),
+    ] {
+        let (o, out) = run(name, &extra);
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let m = io::read_mesh(&out).unwrap();
+        let r = validity::check(&m);
+        assert!(r.is_valid(), "{name}: {r}");
+        files.push(std::fs::read(&out).unwrap());
+    }
+    // The old flag is the `both` rule; the default is `inside`.
+    assert!(files[0] == files[1]);
+    assert!(files[3] == files[4]);
+    // Unknown names and both spellings at once are usage errors that name the choices.
+    let (o, _) = run("bad", &["--small-tets", "outside"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("inside, both, authors"), "{err}");
+    let (o, _) = run("twice", &["--small-tets", "both", "--small-tets-both-ways"]);
+    assert_eq!(o.status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).ok();
+}

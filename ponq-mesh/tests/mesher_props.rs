@@ -303,10 +303,10 @@ fn output_is_the_same_for_any_thread_count() {
 }
 
 #[test]
-fn both_small_tet_rules_give_valid_meshes() {
+fn every_small_tet_rule_gives_valid_meshes() {
     use ponq_mesh::tagging::SmallTetRule;
     let mut r = rng(11);
-    let mut differ = 0;
+    let mut differ = [0; 2];
     for case in 0..4 {
         // A box, a thin plate and a cylinder, as in `cad_like_unions_and_thin_plates`.
         let mut s = box_samples([-0.5, -0.4, -0.3], [0.3, 0.4, 0.2], 12_000, &mut r);
@@ -317,25 +317,30 @@ fn both_small_tet_rules_give_valid_meshes() {
         s.normals.extend(p.normals.into_iter().chain(c.normals));
         let grid = 16 + 8 * case;
         let ponq = ponq_by_grid(&s, grid);
-        let faces: Vec<_> = [SmallTetRule::InsideOnly, SmallTetRule::BothWays]
-            .into_iter()
-            .map(|rule| {
-                let out = mesh_ponq(
-                    &ponq,
-                    &MeshingOptions {
-                        grid_scale: grid as f64,
-                        small_tet_rule: rule,
-                        ..Default::default()
-                    },
-                )
-                .expect("meshing succeeds on finite input");
-                assert_valid(&out, &format!("case {case}, {rule:?}"));
-                assert!(!out.mesh.faces.is_empty());
-                out.mesh.faces
-            })
-            .collect();
-        differ += usize::from(faces[0] != faces[1]);
+        let faces: Vec<_> = [
+            SmallTetRule::InsideOnly,
+            SmallTetRule::BothWays,
+            SmallTetRule::Authors,
+        ]
+        .into_iter()
+        .map(|rule| {
+            let out = mesh_ponq(
+                &ponq,
+                &MeshingOptions {
+                    grid_scale: grid as f64,
+                    small_tet_rule: rule,
+                    ..Default::default()
+                },
+            )
+            .expect("meshing succeeds on finite input");
+            assert_valid(&out, &format!("case {case}, {rule:?}"));
+            assert!(!out.mesh.faces.is_empty());
+            out.mesh.faces
+        })
+        .collect();
+        differ[0] += usize::from(faces[0] != faces[1]);
+        differ[1] += usize::from(faces[0] != faces[2]);
     }
-    // The option takes effect on these CAD-like inputs.
-    assert!(differ > 0);
+    // Each option takes effect on these CAD-like inputs.
+    assert!(differ[0] > 0 && differ[1] > 0, "{differ:?}");
 }

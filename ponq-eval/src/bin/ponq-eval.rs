@@ -1,5 +1,6 @@
 //! `ponq-eval`: reconstruction metrics with the paper's protocol.
 
+use ponq_mesh::tagging::SmallTetRule;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -215,9 +216,15 @@ struct RunArgs {
     /// cell's points whose normals agree within DEG degrees; 0 keeps every point.
     #[arg(long, value_name = "DEG", default_value_t = ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG)]
     merge_smooth: f64,
-    /// The mesher's small-tet rule as the paper's text has it (inside and outside tets; the
-    /// rule before 2026-12-03) instead of the authors' code (inside tets only, the default).
-    #[arg(long)]
+    /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no
+    /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
+    /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
+    /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
+    /// before 2026-12-03). See README, mesher section.
+    #[arg(long, value_name = "RULE", default_value = "inside", value_parser = parse_small_tet_rule)]
+    small_tets: SmallTetRule,
+    /// Same as `--small-tets both` (kept for earlier scripts).
+    #[arg(long, conflicts_with = "small_tets")]
     small_tets_both_ways: bool,
     /// Skip the marching cubes baseline.
     #[arg(long)]
@@ -316,9 +323,9 @@ fn run_split(a: RunArgs) -> Result<()> {
         coarsen: a.coarsen,
         merge_smooth: (a.merge_smooth > 0.0).then_some(a.merge_smooth),
         small_tet_rule: if a.small_tets_both_ways {
-            ponq_mesh::tagging::SmallTetRule::BothWays
+            SmallTetRule::BothWays
         } else {
-            ponq_mesh::tagging::SmallTetRule::InsideOnly
+            a.small_tets
         },
         samples: a.samples,
         renders: a.renders,
@@ -404,4 +411,9 @@ fn run_split(a: RunArgs) -> Result<()> {
         println!("report: {}", a.output.join("report.md").display());
     }
     Ok(())
+}
+
+/// `--small-tets`: a rule name (`SmallTetRule::NAMES`).
+fn parse_small_tet_rule(s: &str) -> Result<SmallTetRule, String> {
+    s.parse()
 }

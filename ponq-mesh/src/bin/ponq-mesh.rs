@@ -62,11 +62,15 @@ struct Args {
     /// onto the sharp edges the quadrics describe (the behaviour before these flips).
     #[arg(long)]
     no_crease_flips: bool,
-    /// The small-tet rule of the tagging as the paper's text has it (a vertex without an inside
-    /// or without an outside tet gets its smallest unknown tet tagged the missing way; the
-    /// mesher's rule before 2026-12-03) instead of the authors' code (inside tets only, the
-    /// default: sharper edges, see README).
-    #[arg(long)]
+    /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no
+    /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
+    /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
+    /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
+    /// before 2026-12-03). See README, mesher section.
+    #[arg(long, value_name = "RULE", default_value = "inside", value_parser = parse_small_tet_rule)]
+    small_tets: SmallTetRule,
+    /// Same as `--small-tets both` (kept for earlier scripts).
+    #[arg(long, conflicts_with = "small_tets")]
     small_tets_both_ways: bool,
     /// Skip the exact validity check of the output (it is cheap; on by default).
     #[arg(long)]
@@ -129,7 +133,7 @@ fn run(args: &Args) -> Result<bool> {
         small_tet_rule: if args.small_tets_both_ways {
             SmallTetRule::BothWays
         } else {
-            SmallTetRule::InsideOnly
+            args.small_tets
         },
         ..Default::default()
     };
@@ -222,4 +226,9 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// `--small-tets`: a rule name (`SmallTetRule::NAMES`).
+fn parse_small_tet_rule(s: &str) -> Result<SmallTetRule, String> {
+    s.parse()
 }

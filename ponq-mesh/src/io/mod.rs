@@ -134,6 +134,35 @@ pub(crate) fn write_file(
     w.flush().map_err(|e| Error::io(path, e))
 }
 
+/// Writes one text line per item of `items` to `w`, in order: the lines are formatted by
+/// `line` in parallel, a block of items per task, a few blocks at a time (the formatting of
+/// floats is most of the time of writing a mesh as text; the memory held is a few blocks').
+pub(crate) fn write_lines_par<T: Sync, W: std::io::Write>(
+    w: &mut W,
+    items: &[T],
+    line: impl Fn(&mut Vec<u8>, &T) -> std::io::Result<()> + Sync,
+) -> std::io::Result<()> {
+    use rayon::prelude::*;
+    const BLOCK: usize = 1 << 13;
+    let group = BLOCK * 4 * rayon::current_num_threads().max(1);
+    for part in items.chunks(group) {
+        let texts: Vec<Vec<u8>> = part
+            .par_chunks(BLOCK)
+            .map(|block| {
+                let mut out = Vec::with_capacity(block.len() * 48);
+                for item in block {
+                    line(&mut out, item)?;
+                }
+                Ok(out)
+            })
+            .collect::<std::io::Result<_>>()?;
+        for t in &texts {
+            w.write_all(t)?;
+        }
+    }
+    Ok(())
+}
+
 /// Checks that a mesh can be written: every face index in range, every coordinate finite.
 pub(crate) fn check_writable(mesh: &TriMesh) -> Result<()> {
     let n = mesh.vertices.len();
@@ -260,6 +289,36 @@ pub(crate) fn parse_f64(tok: &str) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parallel_lines_are_the_sequential_text() {
+        use std::io::Write;
+        // Sizes around the block (8192) and the group of blocks, so the order across both
+        // is exercised.
+        for n in [0usize, 1, 8191, 8193, 70_001, 200_000] {
+            let items: Vec<[f64; 2]> = (0..n)
+                .map(|i| [i as f64 / 7.0, (i as f64).sqrt()])
+                .collect();
+            let mut seq = Vec::new();
+            for it in &items {
+                writeln!(seq, "{:?} {:?}", it[0], it[1]).unwrap();
+            }
+            let mut par = Vec::new();
+            write_lines_par(&mut par, &items, |o, it| {
+                writeln!(o, "{:?} {:?}", it[0], it[1])
+            })
+            .unwrap();
+            assert!(par == seq, "{n} items");
+        }
+        // An error of the writer comes back.
+        let mut full = [0u8; 10];
+        let items = vec![1.5f64; 100];
+        let err = write_lines_par(&mut &mut full[..], &items, |o, x| writeln!(o, "{x:?}"));
+        assert_eq!(
+            err.map_err(|e| e.kind()),
+            Err(std::io::ErrorKind::WriteZero)
+        );
+    }
 
     #[test]
     fn format_from_path() {

@@ -148,19 +148,18 @@ pub fn write_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()> {
         mesh.vertices.len(),
         mesh.faces.len()
     )?;
-    for v in &mesh.vertices {
-        writeln!(w, "v {:?} {:?} {:?}", v[0], v[1], v[2])?;
-    }
-    for f in &mesh.faces {
+    super::write_lines_par(&mut w, &mesh.vertices, |o, v| {
+        writeln!(o, "v {:?} {:?} {:?}", v[0], v[1], v[2])
+    })?;
+    super::write_lines_par(&mut w, &mesh.faces, |o, f| {
         writeln!(
-            w,
+            o,
             "f {} {} {}",
             f[0] as u64 + 1,
             f[1] as u64 + 1,
             f[2] as u64 + 1
-        )?;
-    }
-    Ok(())
+        )
+    })
 }
 
 /// Writes `mesh` to the OBJ file `path`; errors name the file. A mesh with a face index out

@@ -159,13 +159,12 @@ pub fn write_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()> {
         .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
     writeln!(w, "OFF")?;
     writeln!(w, "{} {} 0", mesh.vertices.len(), mesh.faces.len())?;
-    for v in &mesh.vertices {
-        writeln!(w, "{:?} {:?} {:?}", v[0], v[1], v[2])?;
-    }
-    for f in &mesh.faces {
-        writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
-    }
-    Ok(())
+    super::write_lines_par(&mut w, &mesh.vertices, |o, v| {
+        writeln!(o, "{:?} {:?} {:?}", v[0], v[1], v[2])
+    })?;
+    super::write_lines_par(&mut w, &mesh.faces, |o, f| {
+        writeln!(o, "3 {} {} {}", f[0], f[1], f[2])
+    })
 }
 
 /// Writes `mesh` to the OFF file `path`; errors name the file. A mesh with a face index out

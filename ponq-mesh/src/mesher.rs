@@ -37,6 +37,13 @@ pub struct MeshingOptions {
     /// ([`crate::flips`]; default true, closed surfaces only). `false` keeps the triangles of
     /// the minimum cut as they are (the behaviour before this option).
     pub align_creases: bool,
+    /// Weld tolerance, relative to the domain's largest side (default `1e-10`; 0: off). When
+    /// the surface has an edge at most this long (two v* a rounding apart: ponq-fit's PoNQs of
+    /// CAD parts have some, where the quadrics of two cells meet at one corner), the v* within
+    /// this distance of each other are merged into one point (quadrics summed, as exact
+    /// duplicates are) and the PoNQ is meshed again: the output then has no such edge and
+    /// none of the near-zero-area triangles next to it. The Delaunay stays exact either way.
+    pub weld: f64,
 }
 
 impl Default for MeshingOptions {
@@ -49,9 +56,13 @@ impl Default for MeshingOptions {
             manifold: true,
             open_threshold: None,
             align_creases: true,
+            weld: DEFAULT_WELD,
         }
     }
 }
+
+/// Default [`MeshingOptions::weld`].
+pub const DEFAULT_WELD: f64 = 1e-10;
 
 impl MeshingOptions {
     /// The domain box from six numbers `xmin, ymin, zmin, xmax, ymax, zmax` (the form the
@@ -139,6 +150,9 @@ pub struct MeshingStats {
     pub manifold: ManifoldStats,
     /// The crease-aligning flips.
     pub flips: crate::flips::FlipStats,
+    /// Input points moved onto another one by the weld ([`MeshingOptions::weld`]; when not
+    /// 0, the stage times are those of both passes).
+    pub welded: usize,
     /// Stage timings.
     pub times: StageTimes,
 }
@@ -215,11 +229,183 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     if let Some(i) = vstars.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         return Err(Error::InvalidInput(format!("v*[{i}] is not finite")));
     }
+    stats.times.prepare = t0.elapsed();
+    let m = ponq.len();
+    let weld_tol = opts.weld * (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
+    if !(opts.weld >= 0.0 && weld_tol.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "the weld tolerance must be a finite number >= 0, got {}",
+            opts.weld
+        )));
+    }
+    let mut points = vstars;
+    let (mesh, source_point) = loop {
+        let Pass {
+            cx,
+            mut mesh,
+            back,
+            source,
+        } = mesh_pass(ponq, opts, &points, &scales, &mut stats)?;
+        let t5 = Instant::now();
+        let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
+        let mut flip_time = Duration::ZERO;
+        if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
+            let t = Instant::now();
+            // The mesh vertices' data through `back`, not gathered into new arrays.
+            stats.flips = crate::flips::align_creases_indexed(
+                &mut mesh,
+                &cx.quadrics,
+                &cx.normals,
+                &back,
+                cx.h,
+            );
+            flip_time = t.elapsed();
+            stats.times.flips += flip_time;
+        }
+        if let Some(th) = opts.open_threshold {
+            let aniso: Vec<f64> = back
+                .iter()
+                .map(|&v| cx.quadrics[v as usize].anisotropy())
+                .collect();
+            let keep = cull_open(&mut mesh, &aniso, th);
+            source_point = keep.iter().map(|&i| source_point[i as usize]).collect();
+        }
+        stats.times.extraction += t5.elapsed() - flip_time;
+        // One more pass at most: after the weld no two points are within the tolerance.
+        if stats.welded == 0 && weld_tol > 0.0 && has_edge_within(&mesh, weld_tol) {
+            let t = Instant::now();
+            stats.welded = weld(&cx.dt, m, &mut points, weld_tol);
+            stats.times.prepare += t.elapsed();
+            if stats.welded > 0 {
+                continue;
+            }
+        }
+        break (mesh, source_point);
+    };
+
+    let message = if m == 0 {
+        Some("the PoNQ has no point: empty mesh".to_string())
+    } else if mesh.faces.is_empty() {
+        Some(format!(
+            "no tetrahedron was labelled inside ({} points, {} tets): empty mesh",
+            m, stats.tets
+        ))
+    } else {
+        None
+    };
+    Ok(MeshingOutput {
+        mesh,
+        source_point,
+        stats,
+        message,
+    })
+}
+
+/// Whether some edge of `mesh` is at most `tol` long.
+fn has_edge_within(mesh: &TriMesh, tol: f64) -> bool {
+    use rayon::prelude::*;
+    let tol2 = tol * tol;
+    mesh.faces.par_iter().any(|f| {
+        (0..3).any(|k| {
+            let (a, b) = (
+                mesh.vertices[f[k] as usize],
+                mesh.vertices[f[(k + 1) % 3] as usize],
+            );
+            (0..3).map(|i| (a[i] - b[i]) * (a[i] - b[i])).sum::<f64>() <= tol2
+        })
+    })
+}
+
+/// Moves each v* (`vstars`, the first `m` points of `dt`) that is within `tol` of another
+/// one onto it: the groups are the connected parts of the Delaunay edges at most `tol` long
+/// (two points within `tol` are joined by such a path: the Delaunay graph contains the
+/// Gabriel graph, and a point inside the ball on a short edge is nearer still), each moved
+/// onto its point of lowest index. Protective corners (vertices of points `>= m`) stay out.
+/// Returns how many points moved.
+fn weld(dt: &Delaunay, m: usize, vstars: &mut [[f64; 3]], tol: f64) -> usize {
+    use rayon::prelude::*;
+    let nv = dt.vertices.len();
+    // The first input point of each vertex (u32::MAX: a corner's).
+    let mut first = vec![u32::MAX; nv];
+    for (i, &v) in dt.vertex_of_point.iter().enumerate().take(m).rev() {
+        first[v as usize] = i as u32;
+    }
+    let tol2 = tol * tol;
+    const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+    let short: Vec<(u32, u32)> = dt
+        .tets
+        .par_iter()
+        .flat_map_iter(|t| {
+            EDGES.iter().filter_map(move |&(i, j)| {
+                let (a, b) = (t[i], t[j]);
+                let (p, q) = (dt.vertices[a as usize], dt.vertices[b as usize]);
+                let d2: f64 = (0..3).map(|k| (p[k] - q[k]) * (p[k] - q[k])).sum();
+                (d2 <= tol2).then_some((a, b))
+            })
+        })
+        .collect();
+    // Union-find, each set rooted at its vertex of lowest first point.
+    let mut parent: Vec<u32> = (0..nv as u32).collect();
+    fn root(parent: &mut [u32], mut v: u32) -> u32 {
+        while parent[v as usize] != v {
+            parent[v as usize] = parent[parent[v as usize] as usize];
+            v = parent[v as usize];
+        }
+        v
+    }
+    for (a, b) in short {
+        if first[a as usize] == u32::MAX || first[b as usize] == u32::MAX {
+            continue;
+        }
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        if ra != rb {
+            let (keep, other) = if first[ra as usize] < first[rb as usize] {
+                (ra, rb)
+            } else {
+                (rb, ra)
+            };
+            parent[other as usize] = keep;
+        }
+    }
+    let mut moved = 0;
+    for (i, p) in vstars.iter_mut().enumerate() {
+        let v = dt.vertex_of_point[i];
+        let r = root(&mut parent, v);
+        if r != v {
+            *p = dt.vertices[r as usize];
+            moved += 1;
+        }
+    }
+    moved
+}
+
+/// What one pass of the mesher (Delaunay to extraction) gives.
+struct Pass {
+    cx: TetComplex,
+    mesh: TriMesh,
+    /// Complex vertex of each mesh vertex.
+    back: Vec<u32>,
+    /// First input point of each complex vertex (`u32::MAX`: a protective corner).
+    source: Vec<u32>,
+}
+
+/// Delaunay, tagging, cut, manifold repair and extraction of the points `vstars` (one per
+/// input point of `ponq`; `scales`: their quadrics' largest eigenvalues); stage times and
+/// counts are added to `stats`.
+fn mesh_pass(
+    ponq: &Ponq,
+    opts: &MeshingOptions,
+    vstars: &[[f64; 3]],
+    scales: &[f64],
+    stats: &mut MeshingStats,
+) -> Result<Pass> {
+    let t0 = Instant::now();
+    let (dlo, dhi) = opts.domain;
     let extent = (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
     let cell = extent / opts.grid_scale;
     // Protective box: the domain, enlarged by a cell where some v* leaves it.
     let (mut lo, mut hi) = (dlo, dhi);
-    for p in &vstars {
+    for p in vstars {
         for k in 0..3 {
             if p[k] <= lo[k] {
                 lo[k] = p[k] - cell;
@@ -234,7 +420,8 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         0.5 * (lo[1] + hi[1]),
         0.5 * (lo[2] + hi[2]),
     ];
-    let mut points = vstars;
+    let mut points = Vec::with_capacity(vstars.len() + 8);
+    points.extend_from_slice(vstars);
     for i in 0..8 {
         points.push([
             if i & 1 == 0 { lo[0] } else { hi[0] },
@@ -242,11 +429,11 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
             if i & 4 == 0 { lo[2] } else { hi[2] },
         ]);
     }
-    stats.times.prepare = t0.elapsed();
+    stats.times.prepare += t0.elapsed();
 
     let t1 = Instant::now();
     let dt = Delaunay::new(&points)?;
-    stats.times.delaunay = t1.elapsed();
+    stats.times.delaunay += t1.elapsed();
 
     let t2 = Instant::now();
     // Per-vertex data; duplicates of one position are merged (quadrics summed, normals averaged).
@@ -334,6 +521,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         opts.grid_scale * opts.grid_scale,
     );
     let mut labels = tag_all(&cx, opts.small_tet_factor, opts.small_tet_rule);
+    stats.tagged = [0; 3];
     for l in &labels {
         match l {
             Label::Inside => stats.tagged[0] += 1,
@@ -341,53 +529,26 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
             Label::Unknown => stats.tagged[2] += 1,
         }
     }
-    stats.times.tagging = t2.elapsed();
+    stats.times.tagging += t2.elapsed();
 
     let t3 = Instant::now();
     stats.cut = min_cut(&cx, &mut labels);
-    stats.times.cut = t3.elapsed();
+    stats.times.cut += t3.elapsed();
 
     let t4 = Instant::now();
     if opts.manifold {
         stats.manifold = make_manifold(&cx, &mut labels);
     }
-    stats.times.manifold = t4.elapsed();
+    stats.times.manifold += t4.elapsed();
 
     let t5 = Instant::now();
-    let (mut mesh, back) = extract_boundary(&cx, &labels);
-    let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
-    if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
-        let t = Instant::now();
-        // The mesh vertices' data through `back`, not gathered into new arrays.
-        stats.flips =
-            crate::flips::align_creases_indexed(&mut mesh, &cx.quadrics, &cx.normals, &back, cx.h);
-        stats.times.flips = t.elapsed();
-    }
-    if let Some(th) = opts.open_threshold {
-        let aniso: Vec<f64> = back
-            .iter()
-            .map(|&v| cx.quadrics[v as usize].anisotropy())
-            .collect();
-        let keep = cull_open(&mut mesh, &aniso, th);
-        source_point = keep.iter().map(|&i| source_point[i as usize]).collect();
-    }
-    stats.times.extraction = t5.elapsed() - stats.times.flips;
-
-    let message = if m == 0 {
-        Some("the PoNQ has no point: empty mesh".to_string())
-    } else if mesh.faces.is_empty() {
-        Some(format!(
-            "no tetrahedron was labelled inside ({} points, {} tets): empty mesh",
-            m, stats.tets
-        ))
-    } else {
-        None
-    };
-    Ok(MeshingOutput {
+    let (mesh, back) = extract_boundary(&cx, &labels);
+    stats.times.extraction += t5.elapsed();
+    Ok(Pass {
+        cx,
         mesh,
-        source_point,
-        stats,
-        message,
+        back,
+        source,
     })
 }
 

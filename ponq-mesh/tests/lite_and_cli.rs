@@ -398,3 +398,47 @@ fn cli_small_tet_rules_by_name() {
     assert_eq!(o.status.code(), Some(2));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn cli_authors_mesher_is_its_three_flags() {
+    let dir = std::env::temp_dir().join(format!("ponq-cli-authors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.join(format!("{name}.obj"));
+        let o = bin()
+            .arg(example("csg_ponq_32.npz"))
+            .arg("-o")
+            .arg(&out)
+            .args(["--grid-scale", "32"])
+            .args(extra)
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let (a, fa) = run("preset", &["--authors-mesher"]);
+    let flags = [
+        "--small-tets",
+        "authors",
+        "--no-crease-flips",
+        "--no-manifold",
+    ];
+    let (b, fb) = run("flags", &flags);
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    assert!(std::fs::read(&fa).unwrap() == std::fs::read(&fb).unwrap());
+    // It differs from the default (flips, manifold repair) on this CAD part.
+    let (c, fc) = run("default", &[]);
+    assert!(c.status.success());
+    assert!(std::fs::read(&fa).unwrap() != std::fs::read(&fc).unwrap());
+    // It fixes the small-tet rule: another one with it is a usage error.
+    let (o, _) = run("both", &["--authors-mesher", "--small-tets", "both"]);
+    assert_eq!(o.status.code(), Some(2));
+    // A negative or non-finite weld tolerance is a clear error.
+    for bad in ["-1e-10", "nan", "inf"] {
+        let (o, _) = run("weld", &["--weld", bad]);
+        assert_eq!(o.status.code(), Some(2), "--weld {bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("weld"), "--weld {bad}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -344,3 +344,102 @@ fn every_small_tet_rule_gives_valid_meshes() {
     // Each option takes effect on these CAD-like inputs.
     assert!(differ[0] > 0 && differ[1] > 0, "{differ:?}");
 }
+
+/// The shortest edge of a mesh.
+fn shortest_edge(m: &ponq_mesh::TriMesh) -> f64 {
+    m.faces
+        .iter()
+        .flat_map(|f| (0..3).map(move |k| (f[k], f[(k + 1) % 3])))
+        .map(|(a, b)| {
+            let (p, q) = (m.vertices[a as usize], m.vertices[b as usize]);
+            (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn near_coincident_vstars_are_welded_into_one_vertex() {
+    // A box PoNQ, and copies of its points at the box's corners whose v* are a rounding away
+    // from the originals' (as ponq-fit's PoNQs of CAD parts have where cells meet at a
+    // corner).
+    let s = box_samples(
+        [-0.47, -0.41, -0.29],
+        [0.53, 0.39, 0.31],
+        40_000,
+        &mut rng(9),
+    );
+    let base = ponq_by_grid(&s, 16);
+    let mut ponq = base.clone();
+    let mut vs = ponq.vstars();
+    let corners: Vec<usize> = (0..8)
+        .filter_map(|c| {
+            let target: [f64; 3] = std::array::from_fn(|k| {
+                let (lo, hi) = ([-0.47, -0.41, -0.29][k], [0.53, 0.39, 0.31][k]);
+                if c >> k & 1 == 0 { lo } else { hi }
+            });
+            (0..vs.len()).min_by(|&i, &j| {
+                let d = |p: [f64; 3]| (0..3).map(|k| (p[k] - target[k]).powi(2)).sum::<f64>();
+                d(vs[i]).total_cmp(&d(vs[j]))
+            })
+        })
+        .collect();
+    for &i in &corners {
+        ponq.points.push(ponq.points[i]);
+        ponq.normals.push(ponq.normals[i]);
+        ponq.quadrics.push(ponq.quadrics[i]);
+        vs.push(vs[i].map(|x| x.next_up()));
+    }
+    ponq.vstars = Some(vs);
+    let mesh = |ponq: &ponq_mesh::Ponq, weld: f64| {
+        let out = mesh_ponq(
+            ponq,
+            &MeshingOptions {
+                grid_scale: 16.0,
+                weld,
+                ..Default::default()
+            },
+        )
+        .expect("meshing succeeds on finite input");
+        assert_valid(&out, &format!("weld {weld}"));
+        out
+    };
+    // Without the weld the copies give edges a rounding long (and triangles of no area).
+    let plain = mesh(&ponq, 0.0);
+    assert_eq!(plain.stats.welded, 0);
+    assert!(
+        shortest_edge(&plain.mesh) < 1e-15,
+        "{}",
+        shortest_edge(&plain.mesh)
+    );
+    // With it, each copy is merged into its original: no such edge is left.
+    let welded = mesh(&ponq, ponq_mesh::mesher::DEFAULT_WELD);
+    assert_eq!(welded.stats.welded, corners.len());
+    assert!(
+        shortest_edge(&welded.mesh) > 1e-6,
+        "{}",
+        shortest_edge(&welded.mesh)
+    );
+    assert!(welded.mesh.vertices.len() < plain.mesh.vertices.len());
+    // On the PoNQ without copies the weld changes nothing.
+    let (a, b) = (
+        mesh(&base, 0.0),
+        mesh(&base, ponq_mesh::mesher::DEFAULT_WELD),
+    );
+    assert_eq!(b.stats.welded, 0);
+    assert_eq!(a.mesh.faces, b.mesh.faces);
+    assert_eq!(a.mesh.vertices, b.mesh.vertices);
+    // A negative or non-finite tolerance is an error, not a silent default.
+    for bad in [-1e-12, f64::NAN, f64::INFINITY] {
+        let r = mesh_ponq(
+            &base,
+            &MeshingOptions {
+                weld: bad,
+                ..Default::default()
+            },
+        );
+        assert!(
+            matches!(r, Err(ponq_mesh::Error::InvalidInput(_))),
+            "weld {bad}"
+        );
+    }
+}

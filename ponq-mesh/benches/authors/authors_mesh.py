@@ -5,7 +5,12 @@ imported from a checkout of it, unmodified) on a PoNQ .npz (points, normals, qua
 
     AUTHORS_PONQ=/path/to/PoNQ/src/utils python3 authors_mesh.py IN.npz RES OUT.obj
 
-prints `V .. F .. seconds ..` (meshing only). Needs Debian's python3-torch, python3-scipy,
+prints `V .. F .. seconds ..` (meshing only). With AUTHORS_FLOW=bk their `min_cut` gets
+networkx's Boykov-Kolmogorov flow, on capacities clipped at 0, instead of its default
+preflow-push, whose partition is not always a minimum cut (README, mesher section). With
+AUTHORS_CLAMP=1 the `arccos` of their module gets its argument clipped to [-1, 1] (their face
+scores take the arccos of dot products of unit vectors, which rounding puts just above 1 at
+times: NaN capacities). Nothing else of theirs changes. Needs Debian's python3-torch, python3-scipy,
 python3-networkx. v* are the SVD pseudo-inverse with the 0.05 relative cut-off (the paper's
 and their default), grid_scale = RES."""
 import sys, types, time
@@ -18,7 +23,39 @@ for m in ['trimesh', 'igl', 'sklearn', 'sklearn.neighbors', 'skimage', 'skimage.
     sys.modules.setdefault(m, Stand(m))
 import os
 sys.path.insert(0, os.environ.get('AUTHORS_PONQ', 'PoNQ/src/utils'))
+if os.environ.get('AUTHORS_FLOW') == 'bk':
+    import networkx as nx
+    from collections import deque
+    def _bk_minimum_cut(G, s, t, **kw):
+        # Boykov-Kolmogorov needs capacities >= 0; rounding leaves a few of theirs at about
+        # -1e-13 (unclamped quadric terms; ours clamps each term at 0).
+        for _, _, data in G.edges(data=True):
+            data['capacity'] = max(data['capacity'], 0.0)
+        R = nx.algorithms.flow.boykov_kolmogorov(G, s, t)
+        # The partition as nx.minimum_cut makes it (the sink side: the nodes that still reach
+        # t in the residual network), but with a tolerance: networkx drops only arcs whose
+        # flow equals their capacity exactly, and on floats a saturated arc may miss by one
+        # rounding, leaving the source on the sink side.
+        pred = {}
+        for u, v, d in R.edges(data=True):
+            if d['capacity'] - d['flow'] > 1e-9 * max(1.0, abs(d['capacity'])):
+                pred.setdefault(v, []).append(u)
+        sink_side, todo = {t}, deque([t])
+        while todo:
+            for u in pred.get(todo.popleft(), []):
+                if u not in sink_side:
+                    sink_side.add(u)
+                    todo.append(u)
+        return R.graph['flow_value'], (set(G) - sink_side, sink_side)
+    nx.minimum_cut = _bk_minimum_cut
+import PoNQ_to_mesh
 from PoNQ_to_mesh import MeshFromPoNQ
+if os.environ.get('AUTHORS_CLAMP') == '1':
+    # Their methods read `np` from their module's globals when called.
+    clamped = types.ModuleType('numpy_with_clamped_arccos')
+    clamped.__dict__.update(np.__dict__)
+    clamped.arccos = lambda x, *a, **k: np.arccos(np.clip(x, -1.0, 1.0), *a, **k)
+    PoNQ_to_mesh.np = clamped
 
 def vstars_from_quadrics(Q, P, eps=0.05):
     # v* = P + pinv_eps(A) (b - A P): SVD pseudo-inverse, singular values below eps * largest dropped

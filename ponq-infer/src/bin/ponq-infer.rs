@@ -238,6 +238,12 @@ fn run(args: &Args) -> Result<Outcome> {
         if let Some(m) = &res.message {
             println!("note: {m}");
         }
+        if s.welded > 0 {
+            println!(
+                "note: {} points welded onto others a rounding away (meshed twice; see ponq-mesh --weld)",
+                s.welded
+            );
+        }
         println!(
             "time (ms): read {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}), write {:.1}",
             ms(read_time),

@@ -351,22 +351,30 @@ fn cli_bad_input_is_a_clear_error() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Runs `ponq-mesh` on the shipped CSG example at 32^3 with `extra` flags, writing
+/// `dir/name.obj`: the process output and the file's path.
+fn mesh_example_into(
+    dir: &std::path::Path,
+    name: &str,
+    extra: &[&str],
+) -> (std::process::Output, std::path::PathBuf) {
+    let out = dir.join(format!("{name}.obj"));
+    let o = bin()
+        .arg(example("csg_ponq_32.npz"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--grid-scale", "32"])
+        .args(extra)
+        .output()
+        .unwrap();
+    (o, out)
+}
+
 #[test]
 fn cli_small_tet_rules_by_name() {
     let dir = std::env::temp_dir().join(format!("ponq-cli-rules-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let run = |name: &str, extra: &[&str]| {
-        let out = dir.join(format!("{name}.obj"));
-        let o = bin()
-            .arg(example("csg_ponq_32.npz"))
-            .arg("-o")
-            .arg(&out)
-            .args(["--grid-scale", "32"])
-            .args(extra)
-            .output()
-            .unwrap();
-        (o, out)
-    };
+    let run = |name: &str, extra: &[&str]| mesh_example_into(&dir, name, extra);
     let mut files = Vec::new();
     for (name, extra) in [
         ("both", vec!["--small-tets", "both"]),
@@ -403,18 +411,7 @@ fn cli_small_tet_rules_by_name() {
 fn cli_authors_mesher_is_its_three_flags() {
     let dir = std::env::temp_dir().join(format!("ponq-cli-authors-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let run = |name: &str, extra: &[&str]| {
-        let out = dir.join(format!("{name}.obj"));
-        let o = bin()
-            .arg(example("csg_ponq_32.npz"))
-            .arg("-o")
-            .arg(&out)
-            .args(["--grid-scale", "32"])
-            .args(extra)
-            .output()
-            .unwrap();
-        (o, out)
-    };
+    let run = |name: &str, extra: &[&str]| mesh_example_into(&dir, name, extra);
     let (a, fa) = run("preset", &["--authors-mesher"]);
     let flags = [
         "--small-tets",

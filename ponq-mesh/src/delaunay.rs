@@ -72,6 +72,8 @@ pub struct DelaunayStats {
     /// Insertions whose cavity boundary had too many vertices for the local-number map and
     /// whose new tets were linked through the directed-edge hash table instead.
     pub large_cavities: usize,
+    /// Points merged into a vertex at another position ([`DelaunayOptions::merge_within`]).
+    pub merged_near: usize,
 }
 
 /// Options of [`Delaunay::with_options`].
@@ -83,6 +85,12 @@ pub struct DelaunayOptions {
     /// Testing aid: make every `n`-th lock attempt of the parallel phase fail as if another
     /// worker held the tet, so that the back-off path runs (0: never).
     pub fail_every_nth_lock: u32,
+    /// Points within this (Euclidean) distance of the first point of their run in the
+    /// sorted order (by Hilbert cell, then position) become one vertex, as exact duplicates
+    /// do (0: exact duplicates only, the default). Best effort: points a rounding apart are
+    /// nearly always next to each other in that order, but not always (a Hilbert cell's edge
+    /// between them); the triangulation of the vertices is exact either way.
+    pub merge_within: f64,
 }
 
 impl Default for DelaunayOptions {
@@ -90,6 +98,7 @@ impl Default for DelaunayOptions {
         Self {
             threads: rayon::current_num_threads(),
             fail_every_nth_lock: 0,
+            merge_within: 0.0,
         }
     }
 }
@@ -193,7 +202,7 @@ struct Distinct {
 /// duplicates have one key, so they end up next to each other. (Before: a sort by position to
 /// merge, then a sort by key of each BRIO round; merging and ordering took 12.9 ms at best at
 /// 109k points on two threads, now 10.6, side by side.)
-fn distinct_points(points: &[[f64; 3]]) -> Distinct {
+fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
     use rayon::prelude::*;
     let keys = hilbert_keys(points);
     let mut idx: Vec<(u64, u32)> = keys.iter().zip(0u32..).map(|(&k, i)| (k, i)).collect();
@@ -210,14 +219,24 @@ fn distinct_points(points: &[[f64; 3]]) -> Distinct {
     });
     let mut group_of_point = vec![0u32; points.len()];
     let mut group_key = Vec::new();
+    let near2 = merge_within * merge_within;
+    // The first point of the current run in sorted order: near points are measured from it,
+    // so that a run never creeps along a chain of near points.
+    let mut first = 0usize;
     for k in 0..idx.len() {
         let (key, i) = idx[k];
+        let q = &points[i as usize];
         let same = k > 0 && {
-            let (p, q) = (&points[idx[k - 1].1 as usize], &points[i as usize]);
-            p[0] == q[0] && p[1] == q[1] && p[2] == q[2]
+            let p = &points[idx[k - 1].1 as usize];
+            (p[0] == q[0] && p[1] == q[1] && p[2] == q[2])
+                || (near2 > 0.0 && {
+                    let r = &points[idx[first].1 as usize];
+                    (0..3).map(|c| (r[c] - q[c]) * (r[c] - q[c])).sum::<f64>() <= near2
+                })
         };
         if !same {
             group_key.push(key);
+            first = k;
         }
         group_of_point[i as usize] = group_key.len() as u32 - 1;
     }
@@ -342,7 +361,7 @@ impl Delaunay {
             vertices,
             vertex_of_point,
             hilbert,
-        } = distinct_points(points);
+        } = distinct_points(points, opts.merge_within.max(0.0));
         // Number the vertices in insertion order inside the builder, so that consecutive
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (order, rounds) = brio_order(&hilbert);
@@ -352,6 +371,16 @@ impl Delaunay {
         dt.tets
             .par_iter_mut()
             .for_each(|tet| *tet = tet.map(|v| order[v as usize]));
+        if opts.merge_within > 0.0 {
+            dt.stats.merged_near = points
+                .iter()
+                .zip(&vertex_of_point)
+                .filter(|&(p, &v)| {
+                    let q = &vertices[v as usize];
+                    p[0] != q[0] || p[1] != q[1] || p[2] != q[2]
+                })
+                .count();
+        }
         dt.vertices = vertices;
         dt.vertex_of_point = vertex_of_point;
         Ok(dt)
@@ -1407,7 +1436,7 @@ impl Builder {
             parallel_insertions,
             deferred: deferred.len(),
             stolen_chunks: workers.iter().map(|w| w.stolen).sum(),
-            large_cavities: 0,
+            ..Default::default()
         };
         self.insert_sequential(&mut main, deferred);
         stats.large_cavities =
@@ -1565,7 +1594,7 @@ mod tests {
                     })
                 })
                 .collect();
-            let d = distinct_points(&points);
+            let d = distinct_points(&points, 0.0);
             let nv = d.vertices.len();
             for (i, p) in points.iter().enumerate() {
                 assert_eq!(d.vertices[d.vertex_of_point[i] as usize], *p);

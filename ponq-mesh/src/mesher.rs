@@ -150,9 +150,12 @@ pub struct MeshingStats {
     pub manifold: ManifoldStats,
     /// The crease-aligning flips.
     pub flips: crate::flips::FlipStats,
-    /// Input points moved onto another one by the weld ([`MeshingOptions::weld`]; when not
-    /// 0, the stage times are those of both passes).
+    /// Input points merged into a vertex at another position by the weld
+    /// ([`MeshingOptions::weld`]).
     pub welded: usize,
+    /// Whether the weld needed a second pass (points the Delaunay's own merge missed; the
+    /// stage times are then those of both passes).
+    pub meshed_twice: bool,
     /// Stage timings.
     pub times: StageTimes,
 }
@@ -239,13 +242,14 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         )));
     }
     let mut points = vstars;
+    let (mut rewelded, mut moved) = (false, 0);
     let (mesh, source_point) = loop {
         let Pass {
             cx,
             mut mesh,
             back,
             source,
-        } = mesh_pass(ponq, opts, &points, &scales, &mut stats)?;
+        } = mesh_pass(ponq, opts, &points, &scales, weld_tol, &mut stats)?;
         let t5 = Instant::now();
         let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
         let mut flip_time = Duration::ZERO;
@@ -272,16 +276,20 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         }
         stats.times.extraction += t5.elapsed() - flip_time;
         // One more pass at most: after the weld no two points are within the tolerance.
-        if stats.welded == 0 && weld_tol > 0.0 && has_edge_within(&mesh, weld_tol) {
+        if !rewelded && weld_tol > 0.0 && has_edge_within(&mesh, weld_tol) {
             let t = Instant::now();
-            stats.welded = weld(&cx.dt, m, &mut points, weld_tol);
+            // Counted apart: the moved points are exact duplicates in the next pass.
+            moved = weld(&cx.dt, m, &mut points, weld_tol);
             stats.times.prepare += t.elapsed();
-            if stats.welded > 0 {
+            if moved > 0 {
+                rewelded = true;
+                stats.meshed_twice = true;
                 continue;
             }
         }
         break (mesh, source_point);
     };
+    stats.welded += moved;
 
     let message = if m == 0 {
         Some("the PoNQ has no point: empty mesh".to_string())
@@ -397,6 +405,7 @@ fn mesh_pass(
     opts: &MeshingOptions,
     vstars: &[[f64; 3]],
     scales: &[f64],
+    weld_tol: f64,
     stats: &mut MeshingStats,
 ) -> Result<Pass> {
     let t0 = Instant::now();
@@ -432,7 +441,16 @@ fn mesh_pass(
     stats.times.prepare += t0.elapsed();
 
     let t1 = Instant::now();
-    let dt = Delaunay::new(&points)?;
+    // v* a rounding apart are nearly always merged here already (one pass); `mesh_ponq`'s
+    // weld catches the rest.
+    let dt = Delaunay::with_options(
+        &points,
+        &crate::delaunay::DelaunayOptions {
+            merge_within: weld_tol,
+            ..Default::default()
+        },
+    )?;
+    stats.welded = dt.stats.merged_near;
     stats.times.delaunay += t1.elapsed();
 
     let t2 = Instant::now();

@@ -384,6 +384,7 @@ fn parallel_insertion_gives_the_same_triangulation() {
             let opts = DelaunayOptions {
                 threads: 2,
                 fail_every_nth_lock: every,
+                ..Default::default()
             };
             let par = Delaunay::with_options(pts, &opts).unwrap();
             assert!(
@@ -399,4 +400,54 @@ fn parallel_insertion_gives_the_same_triangulation() {
         }
         check_locally_delaunay(&one);
     }
+}
+
+#[test]
+fn near_points_merge_only_when_asked() {
+    // A lattice with a copy of some points a rounding away (in x, then in all three axes).
+    // (No coordinate is 0: the next float after 0 is subnormal, where the exact predicates'
+    // products underflow, as Shewchuk's do.)
+    let mut pts = Vec::new();
+    for i in 0..12 {
+        for j in 0..12 {
+            for k in 0..12 {
+                pts.push([
+                    0.05 + i as f64 * 0.1,
+                    0.05 + j as f64 * 0.1 + 0.01 * i as f64,
+                    0.05 + k as f64 * 0.1,
+                ]);
+            }
+        }
+    }
+    let n = pts.len();
+    let copies: Vec<usize> = (0..n).step_by(97).collect();
+    for (c, &i) in copies.iter().enumerate() {
+        let p = pts[i];
+        pts.push(if c % 2 == 0 {
+            [p[0].next_up(), p[1], p[2]]
+        } else {
+            p.map(|x| x.next_down())
+        });
+    }
+    let exact = Delaunay::new(&pts).unwrap();
+    assert_eq!(exact.vertices.len(), pts.len());
+    assert_eq!(exact.stats.merged_near, 0);
+    let merged = Delaunay::with_options(
+        &pts,
+        &DelaunayOptions {
+            merge_within: 1e-9,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // Each copy is its original's vertex, at the original's position (first in input order).
+    assert_eq!(merged.vertices.len(), n);
+    assert_eq!(merged.stats.merged_near, copies.len());
+    for (c, &i) in copies.iter().enumerate() {
+        assert_eq!(merged.vertex_of_point[n + c], merged.vertex_of_point[i]);
+        assert_eq!(merged.vertices[merged.vertex_of_point[i] as usize], pts[i]);
+    }
+    // And the triangulation is the one of the points without the copies.
+    let plain = Delaunay::new(&pts[..n]).unwrap();
+    assert_eq!(merged.tets, plain.tets);
 }

@@ -411,15 +411,38 @@ fn near_coincident_vstars_are_welded_into_one_vertex() {
         "{}",
         shortest_edge(&plain.mesh)
     );
-    // With it, each copy is merged into its original: no such edge is left.
+    // With it, each copy is merged into its original: no such edge is left. The copies sit
+    // next to their originals in the Delaunay's sorted order, so one pass does it.
     let welded = mesh(&ponq, ponq_mesh::mesher::DEFAULT_WELD);
     assert_eq!(welded.stats.welded, corners.len());
+    assert!(!welded.stats.meshed_twice);
     assert!(
         shortest_edge(&welded.mesh) > 1e-6,
         "{}",
         shortest_edge(&welded.mesh)
     );
     assert!(welded.mesh.vertices.len() < plain.mesh.vertices.len());
+    // A copy two roundings away in x with a third point between them in that order (one
+    // rounding in x, 1e-4 away in y): the Delaunay's merge misses the pair, the check of the
+    // output's edges finds it and the second pass welds it.
+    let mut apart = ponq.clone();
+    let vs = apart.vstars.as_mut().expect("stored v*");
+    let i = corners[0];
+    let p = vs[i];
+    let copy = vs.len() - corners.len();
+    vs[copy] = [p[0].next_up().next_up(), p[1], p[2]];
+    vs.push([p[0].next_up(), p[1] - 1e-4, p[2]]);
+    apart.points.push(apart.points[i]);
+    apart.normals.push(apart.normals[i]);
+    apart.quadrics.push(apart.quadrics[i]);
+    let apart_plain = mesh(&apart, 0.0);
+    let short = shortest_edge(&apart_plain.mesh);
+    assert!(short < 1e-15, "{short}");
+    let twice = mesh(&apart, ponq_mesh::mesher::DEFAULT_WELD);
+    assert!(twice.stats.meshed_twice);
+    assert!(twice.stats.welded >= corners.len());
+    let short = shortest_edge(&twice.mesh);
+    assert!(short > 1e-6, "{short}");
     // On the PoNQ without copies the weld changes nothing.
     let (a, b) = (
         mesh(&base, 0.0),

@@ -240,8 +240,9 @@ fn run(args: &Args) -> Result<Outcome> {
         }
         if s.welded > 0 {
             println!(
-                "note: {} points welded onto others a rounding away (meshed twice; see ponq-mesh --weld)",
-                s.welded
+                "note: {} points welded onto others a rounding away{} (see ponq-mesh --weld)",
+                s.welded,
+                if s.meshed_twice { ", meshed twice" } else { "" }
             );
         }
         println!(

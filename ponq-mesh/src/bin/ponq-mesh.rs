@@ -185,8 +185,14 @@ fn run(args: &Args) -> Result<bool> {
         );
         if s.welded > 0 {
             println!(
-                "welded {} points onto others within {:e} of the domain size (meshed twice)",
-                s.welded, args.weld
+                "welded {} points onto others within {:e} of the domain size{}",
+                s.welded,
+                args.weld,
+                if s.meshed_twice {
+                    " (meshed twice)"
+                } else {
+                    ""
+                }
             );
         }
         println!(

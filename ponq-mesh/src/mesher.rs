@@ -37,12 +37,14 @@ pub struct MeshingOptions {
     /// ([`crate::flips`]; default true, closed surfaces only). `false` keeps the triangles of
     /// the minimum cut as they are (the behaviour before this option).
     pub align_creases: bool,
-    /// Weld tolerance, relative to the domain's largest side (default `1e-10`; 0: off). When
-    /// the surface has an edge at most this long (two v* a rounding apart: ponq-fit's PoNQs of
-    /// CAD parts have some, where the quadrics of two cells meet at one corner), the v* within
-    /// this distance of each other are merged into one point (quadrics summed, as exact
-    /// duplicates are) and the PoNQ is meshed again: the output then has no such edge and
-    /// none of the near-zero-area triangles next to it. The Delaunay stays exact either way.
+    /// Weld tolerance, relative to the domain's largest side (default `1e-10`; 0: off). v*
+    /// within this distance of each other (two v* a rounding apart: ponq-fit's PoNQs of CAD
+    /// parts have some, where the quadrics of two cells meet at one corner) become one vertex,
+    /// quadrics summed as for exact duplicates: the Delaunay merges them as it sorts the points
+    /// ([`crate::delaunay::DelaunayOptions::merge_within`]), and if the surface still has an
+    /// edge at most this long, the v* joined by Delaunay edges that short are merged and the
+    /// PoNQ is meshed again. The output then has no such edge and none of the near-zero-area
+    /// triangles next to it. The Delaunay stays exact either way.
     pub weld: f64,
 }
 

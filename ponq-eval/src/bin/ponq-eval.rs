@@ -221,7 +221,7 @@ struct RunArgs {
     /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
     /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
     /// before 2026-12-03). See README, mesher section.
-    #[arg(long, value_name = "RULE", default_value = "inside", value_parser = parse_small_tet_rule)]
+    #[arg(long, value_name = "RULE", default_value = "inside")]
     small_tets: SmallTetRule,
     /// Same as `--small-tets both` (kept for earlier scripts).
     #[arg(long, conflicts_with = "small_tets")]
@@ -411,9 +411,4 @@ fn run_split(a: RunArgs) -> Result<()> {
         println!("report: {}", a.output.join("report.md").display());
     }
     Ok(())
-}
-
-/// `--small-tets`: a rule name (`SmallTetRule::NAMES`).
-fn parse_small_tet_rule(s: &str) -> Result<SmallTetRule, String> {
-    s.parse()
 }

@@ -67,7 +67,7 @@ struct Args {
     /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
     /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
     /// before 2026-12-03). See README, mesher section.
-    #[arg(long, value_name = "RULE", default_value = "inside", value_parser = parse_small_tet_rule)]
+    #[arg(long, value_name = "RULE", default_value = "inside")]
     small_tets: SmallTetRule,
     /// Same as `--small-tets both` (kept for earlier scripts).
     #[arg(long, conflicts_with = "small_tets")]
@@ -77,9 +77,9 @@ struct Args {
     /// face (README, mesher section); like theirs it may have non-manifold edges or vertices.
     #[arg(long, conflicts_with_all = ["small_tets", "small_tets_both_ways", "lite", "open"])]
     authors_mesher: bool,
-    /// Weld tolerance relative to the domain size: when the surface has an edge this short
-    /// (two v* a rounding apart), the v* that close are merged and the PoNQ is meshed again,
-    /// so that no near-zero-area triangle is left. 0 turns it off.
+    /// Weld tolerance relative to the domain size: v* this close (two v* a rounding apart)
+    /// become one vertex, quadrics summed, so that no near-zero-area triangle is left (if the
+    /// Delaunay's merge misses a pair, the PoNQ is meshed again). 0 turns it off.
     #[arg(long, value_name = "REL", allow_hyphen_values = true, default_value_t = ponq_mesh::mesher::DEFAULT_WELD)]
     weld: f64,
     /// Skip the exact validity check of the output (it is cheap; on by default).
@@ -251,9 +251,4 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
-}
-
-/// `--small-tets`: a rule name (`SmallTetRule::NAMES`).
-fn parse_small_tet_rule(s: &str) -> Result<SmallTetRule, String> {
-    s.parse()
 }

@@ -74,6 +74,9 @@ pub struct DelaunayStats {
     pub large_cavities: usize,
     /// Points merged into a vertex at another position ([`DelaunayOptions::merge_within`]).
     pub merged_near: usize,
+    /// Points with a coordinate set to 0 because it was too small next to the largest
+    /// coordinate for exact predicates (see [`Delaunay::with_options`]).
+    pub snapped: usize,
 }
 
 /// Options of [`Delaunay::with_options`].
@@ -185,6 +188,101 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<u64> {
         hilbert_index([c(0), c(1), c(2)], BITS)
     };
     pts.par_iter().map(key).collect()
+}
+
+/// `x * 2^k`, exact wherever the result is a normal number or `x` is scaled up (in two
+/// steps: `2^k` alone need not be a finite `f64`). `k` within `-1100..=1100`.
+fn times_pow2(x: f64, k: i32) -> f64 {
+    let pow2 = |j: i32| f64::from_bits(((j + 1023) as u64) << 52);
+    let h = k / 2;
+    x * pow2(h) * pow2(k - h)
+}
+
+/// How the input is brought into the range where the exact predicates' expansions can
+/// neither underflow nor overflow: scaled by `2^k` so that the largest coordinate magnitude
+/// is in `[1, 2)` (`k = 0` when it is already within `[2^-10, 2^10]`), and every nonzero
+/// coordinate below `2^-140` of that set to 0.
+///
+/// Why this suffices: a nonzero coordinate is then at least `2^-150` in magnitude, so an
+/// integer multiple of `2^-202`; the insphere determinant is a polynomial of degree 5 in the
+/// coordinates (orient3d: 3), so every product and rounding error in its exact evaluation is
+/// a multiple of `2^-1010`, representable (subnormal floats are the multiples of `2^-1074`),
+/// and every magnitude stays far below `2^1024`. Scaling by a power of two is exact and
+/// multiplies each determinant by a positive power of two: no predicate changes sign, so the
+/// triangulation of the scaled points is that of the input.
+#[derive(Debug, Clone, Copy)]
+struct ExactRange {
+    /// The points are multiplied by `2^k`.
+    k: i32,
+    /// Nonzero coordinates below this (after scaling) are set to 0.
+    snap_below: f64,
+}
+
+impl ExactRange {
+    fn of(points: &[[f64; 3]]) -> Self {
+        let m = points
+            .iter()
+            .flat_map(|p| p.iter())
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        if m == 0.0 {
+            return Self {
+                k: 0,
+                snap_below: 0.0,
+            };
+        }
+        let (lo, hi) = (2f64.powi(-10), 2f64.powi(10));
+        if (lo..=hi).contains(&m) {
+            return Self {
+                k: 0,
+                snap_below: m * 2f64.powi(-140),
+            };
+        }
+        // floor(log2 m), also for a subnormal m.
+        let bits = m.to_bits();
+        let biased = ((bits >> 52) & 0x7ff) as i32;
+        let e = if biased == 0 {
+            -1074 + 63 - (bits & ((1 << 52) - 1)).leading_zeros() as i32
+        } else {
+            biased - 1023
+        };
+        Self {
+            k: -e,
+            snap_below: 2f64.powi(-140),
+        }
+    }
+
+    /// A length in input units, in the units of the scaled points.
+    fn scale(&self, x: f64) -> f64 {
+        if self.k == 0 {
+            x
+        } else {
+            times_pow2(x, self.k)
+        }
+    }
+
+    /// The points as the predicates see them, and how many had a coordinate set to 0.
+    /// Borrowed (no copy) when nothing changes: the usual case.
+    fn apply<'a>(&self, points: &'a [[f64; 3]]) -> (std::borrow::Cow<'a, [[f64; 3]]>, usize) {
+        use rayon::prelude::*;
+        let tiny = |x: f64| x != 0.0 && x.abs() < self.snap_below;
+        if self.k == 0 && !points.par_iter().any(|p| p.iter().any(|&x| tiny(x))) {
+            return (std::borrow::Cow::Borrowed(points), 0);
+        }
+        let mut snapped = 0;
+        let out = points
+            .iter()
+            .map(|p| {
+                let q = p.map(|x| self.scale(x));
+                if q.iter().any(|&x| tiny(x)) {
+                    snapped += 1;
+                    q.map(|x| if tiny(x) { 0.0 } else { x })
+                } else {
+                    q
+                }
+            })
+            .collect();
+        (std::borrow::Cow::Owned(out), snapped)
+    }
 }
 
 /// The distinct points of an input and their order along the Hilbert curve, from one sort.
@@ -317,6 +415,13 @@ impl Delaunay {
     /// Triangulates `points`. Exact duplicates are merged (see [`Delaunay::vertex_of_point`]).
     /// Fewer than four affinely independent points give a triangulation without tets.
     ///
+    /// Any finite coordinates work, tiny or huge: the predicates run on the points scaled by
+    /// a power of two (exact, and no sign changes) where their products cannot underflow or
+    /// overflow. A nonzero coordinate below 2^-140 of the largest coordinate magnitude (a
+    /// subnormal next to 1, say) is set to 0 first (the point is then counted in
+    /// [`DelaunayStats::snapped`], and may become a copy of another): its products would
+    /// underflow. The vertices are the input points (with such coordinates at 0).
+    ///
     /// # Errors
     /// [`Error::InvalidInput`] for a non-finite coordinate or more than 2^31 points.
     pub fn new(points: &[[f64; 3]]) -> Result<Self> {
@@ -357,11 +462,13 @@ impl Delaunay {
                 points[i]
             )));
         }
+        let exact = ExactRange::of(points);
+        let (points, snapped) = exact.apply(points);
         let Distinct {
-            vertices,
+            mut vertices,
             vertex_of_point,
             hilbert,
-        } = distinct_points(points, opts.merge_within.max(0.0));
+        } = distinct_points(&points, exact.scale(opts.merge_within.max(0.0)));
         // Number the vertices in insertion order inside the builder, so that consecutive
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (order, rounds) = brio_order(&hilbert);
@@ -380,6 +487,12 @@ impl Delaunay {
                     p[0] != q[0] || p[1] != q[1] || p[2] != q[2]
                 })
                 .count();
+        }
+        dt.stats.snapped = snapped;
+        if exact.k != 0 {
+            vertices
+                .par_iter_mut()
+                .for_each(|p| *p = p.map(|x| times_pow2(x, -exact.k)));
         }
         dt.vertices = vertices;
         dt.vertex_of_point = vertex_of_point;

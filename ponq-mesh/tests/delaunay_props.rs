@@ -405,8 +405,8 @@ fn parallel_insertion_gives_the_same_triangulation() {
 #[test]
 fn near_points_merge_only_when_asked() {
     // A lattice with a copy of some points a rounding away (in x, then in all three axes).
-    // (No coordinate is 0: the next float after 0 is subnormal, where the exact predicates'
-    // products underflow, as Shewchuk's do.)
+    // (No coordinate is 0: the next float after 0 would be set to 0, not merged; see
+    // `tiny_coordinates_are_snapped_to_zero`.)
     let mut pts = Vec::new();
     for i in 0..12 {
         for j in 0..12 {
@@ -450,4 +450,104 @@ fn near_points_merge_only_when_asked() {
     // And the triangulation is the one of the points without the copies.
     let plain = Delaunay::new(&pts[..n]).unwrap();
     assert_eq!(merged.tets, plain.tets);
+}
+
+/// Coordinates far below the others' size (a subnormal such as the next float after 0, or
+/// 1e-200 next to 1) would make the exact predicates' products underflow: they are set to 0
+/// (counted in `stats.snapped`), so those points become copies of the lattice point they
+/// were a rounding away from, and the triangulation stays exact.
+#[test]
+fn tiny_coordinates_are_snapped_to_zero() {
+    let mut pts = Vec::new();
+    for i in 0..5 {
+        for j in 0..5 {
+            for k in 0..5 {
+                pts.push([i as f64 * 0.25, j as f64 * 0.25, k as f64 * 0.25]);
+            }
+        }
+    }
+    let n = pts.len();
+    // Copies of (0, 0, 0), (0.25, 0, 0) and (0, 0.5, 0.25) a tiny amount away.
+    pts.push([5e-324, 0.0, 0.0]);
+    pts.push([0.25, -1e-200, f64::MIN_POSITIVE]);
+    pts.push([-1e-300, 0.5, 0.25]);
+    for threads in [1, 2] {
+        let dt = Delaunay::with_threads(&pts, threads).unwrap();
+        assert_eq!(dt.stats.snapped, 3, "{:?}", dt.stats);
+        assert_eq!(dt.vertices.len(), n);
+        assert_eq!(dt.vertex_of_point[n], dt.vertex_of_point[0]);
+        assert_eq!(dt.vertex_of_point[n + 1], dt.vertex_of_point[25]);
+        assert_eq!(dt.vertex_of_point[n + 2], dt.vertex_of_point[11]);
+        let vol = check_structure(&dt);
+        assert!((vol - 1.0).abs() < 1e-12, "volume {vol}");
+        check_empty_spheres(&dt);
+        assert_eq!(
+            canonical(&dt),
+            canonical(&Delaunay::new(&pts[..n]).unwrap())
+        );
+    }
+    // Coordinates within 2^150 of the largest are kept as they are.
+    let kept = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1e-40, 1e-40, 1e-40],
+    ];
+    let dt = Delaunay::new(&kept).unwrap();
+    assert_eq!((dt.stats.snapped, dt.vertices.len()), (0, 5));
+    assert_eq!(dt.vertices[4], kept[4]);
+}
+
+/// Scaling every point by a power of two is exact and changes no predicate's sign, so the
+/// triangulation of points scaled by 2^-1000 or 2^1000 (where the products of the exact
+/// predicates would underflow or overflow) is the one of the unscaled points, and the
+/// vertices are the scaled points themselves.
+#[test]
+fn tiny_and_huge_point_sets_give_the_unscaled_triangulation() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut pts: Vec<[f64; 3]> = (0..9000)
+        .map(|_| {
+            [
+                rng.random_range(0.5..1.0),
+                rng.random_range(0.5..1.0),
+                rng.random_range(-1.0..-0.5),
+            ]
+        })
+        .collect();
+    // And a lattice part: exactly co-spherical points, decided by the symbolic perturbation.
+    for i in 0..8 {
+        for j in 0..8 {
+            for k in 0..8 {
+                pts.push([i as f64 * 0.0625, j as f64 * 0.0625, k as f64 * 0.0625]);
+            }
+        }
+    }
+    let plain = Delaunay::new(&pts).unwrap();
+    check_locally_delaunay(&plain);
+    for scale in [2f64.powi(-1000), 2f64.powi(1000), 2f64.powi(-1070)] {
+        let scaled: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|x| x * scale)).collect();
+        for threads in [1, 2] {
+            let dt = Delaunay::with_threads(&scaled, threads).unwrap();
+            // 2^-1070 leaves most coordinates subnormal, some lost (rounded): only the
+            // structure is compared there.
+            if scale > 2f64.powi(-1050) {
+                assert_eq!(dt.stats.snapped, 0, "scale {scale:e}");
+                assert!(dt.vertices == scaled, "scale {scale:e}: other vertices");
+                assert!(
+                    dt.tets == plain.tets && dt.neighbors == plain.neighbors,
+                    "scale {scale:e}, {threads} threads: another triangulation"
+                );
+            } else {
+                assert!(!dt.tets.is_empty());
+                let back: Vec<[f64; 3]> =
+                    dt.vertices.iter().map(|p| p.map(|x| x / scale)).collect();
+                let unscaled = Delaunay::new(&back).unwrap();
+                assert!(
+                    canonical(&dt) == canonical(&unscaled),
+                    "{threads} threads: another triangulation"
+                );
+            }
+        }
+    }
 }

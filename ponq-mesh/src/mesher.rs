@@ -66,6 +66,15 @@ impl Default for MeshingOptions {
 /// Default [`MeshingOptions::weld`].
 pub const DEFAULT_WELD: f64 = 1e-10;
 
+/// The largest v* coordinate and domain size [`mesh_ponq`] takes. Beyond it the products
+/// of the exact orientation tests (the crease flips' self-intersection test, the validity
+/// check: degree 3 in the coordinates, no scaling of their own) could overflow; the Delaunay
+/// itself takes any finite input ([`crate::delaunay::Delaunay::with_options`]).
+pub const MAX_COORDINATE: f64 = 1e30;
+
+/// The smallest domain size [`mesh_ponq`] takes (below it, those products could underflow).
+pub const MIN_EXTENT: f64 = 1e-30;
+
 impl MeshingOptions {
     /// The domain box from six numbers `xmin, ymin, zmin, xmax, ymax, zmax` (the form the
     /// command-line programs take), checked: six finite numbers, each max above its min.
@@ -189,7 +198,8 @@ fn unit(n: [f64; 3]) -> [f64; 3] {
 ///
 /// # Errors
 /// [`Error::InvalidInput`] for a non-positive or non-finite `grid_scale`, a degenerate domain,
-/// or non-finite data.
+/// non-finite data, or a domain or v* beyond the range of the exact predicates
+/// ([`MAX_COORDINATE`], [`MIN_EXTENT`]).
 pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     if !(opts.grid_scale > 0.0 && opts.grid_scale.is_finite()) {
         return Err(Error::InvalidInput(format!(
@@ -204,6 +214,15 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     if (0..3).any(|k| !(dhi[k] > dlo[k]) || !dlo[k].is_finite() || !dhi[k].is_finite()) {
         return Err(Error::InvalidInput(format!(
             "domain box {dlo:?}..{dhi:?} is empty or not finite"
+        )));
+    }
+    let extent = (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
+    if !(MIN_EXTENT..=MAX_COORDINATE).contains(&extent)
+        || dlo.iter().chain(&dhi).any(|c| c.abs() > MAX_COORDINATE)
+    {
+        return Err(Error::InvalidInput(format!(
+            "domain box {dlo:?}..{dhi:?}: its size must be within {MIN_EXTENT:e}..{MAX_COORDINATE:e} \
+             and its corners within +-{MAX_COORDINATE:e} (PoNQs live in [-1, 1]^3: rescale the input)"
         )));
     }
     let mut stats = MeshingStats {
@@ -233,6 +252,16 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
     };
     if let Some(i) = vstars.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         return Err(Error::InvalidInput(format!("v*[{i}] is not finite")));
+    }
+    if let Some(i) = vstars
+        .iter()
+        .position(|p| p.iter().any(|c| c.abs() > MAX_COORDINATE))
+    {
+        return Err(Error::InvalidInput(format!(
+            "v*[{i}] = {:?} is beyond +-{MAX_COORDINATE:e} (PoNQs live in [-1, 1]^3: rescale \
+             the input)",
+            vstars[i]
+        )));
     }
     stats.times.prepare = t0.elapsed();
     let m = ponq.len();
@@ -612,5 +641,26 @@ mod tests {
             mesh_ponq(&Ponq::default(), &opts),
             Err(Error::InvalidInput(_))
         ));
+        // Domains beyond the exact predicates' range are refused, with a hint (the size is the
+        // largest side: a thin box is fine).
+        for (lo, hi) in [
+            ([-1e31, 0.0, 0.0], [1.0; 3]),
+            ([0.0; 3], [2e30, 1.0, 1.0]),
+            ([0.0; 3], [1e-31; 3]),
+        ] {
+            let opts = MeshingOptions {
+                domain: (lo, hi),
+                ..Default::default()
+            };
+            match mesh_ponq(&Ponq::default(), &opts) {
+                Err(Error::InvalidInput(m)) => assert!(m.contains("rescale"), "{m}"),
+                other => panic!("{lo:?}..{hi:?}: {other:?}"),
+            }
+        }
+        let small = MeshingOptions {
+            domain: ([0.0; 3], [1e-20; 3]),
+            ..Default::default()
+        };
+        assert!(mesh_ponq(&Ponq::default(), &small).is_ok());
     }
 }

@@ -4,7 +4,7 @@
 //! quadrics, with and without the weld. The output must always be valid
 //! (closed, oriented, manifold, no self-intersection, checked exactly) or empty with a message.
 
-use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::mesher::{MAX_COORDINATE, MeshingOptions, mesh_ponq};
 use ponq_mesh::{Ponq, Quadric, validity};
 use proptest::prelude::*;
 
@@ -14,8 +14,17 @@ fn coord() -> impl Strategy<Value = f64> {
         (-5i32..=5).prop_map(|i| i as f64 * 0.25),
         -1.2f64..1.2,
         // Tiny next to the others (subnormals among them): the exact predicates' products
-        // would underflow there (the Delaunay sets them to 0).
-        prop::sample::select(vec![5e-324, -5e-324, f64::MIN_POSITIVE, 1e-200, -1e-60]),
+        // would underflow there (the Delaunay sets them to 0); huge ones: refused.
+        prop::sample::select(vec![
+            5e-324,
+            -5e-324,
+            f64::MIN_POSITIVE,
+            1e-200,
+            -1e-60,
+            1e25,
+            1e100,
+            -3e40
+        ]),
     ]
 }
 
@@ -73,8 +82,16 @@ proptest! {
         weld in prop_oneof![Just(0.0f64), Just(1e-10)],
     ) {
         let opts = MeshingOptions { grid_scale: grid, manifold, weld, ..Default::default() };
-        let out = mesh_ponq(&p, &opts)
-            .expect("finite input never errors");
+        let beyond = p.points.iter().flatten().any(|c| c.abs() > MAX_COORDINATE);
+        let out = match mesh_ponq(&p, &opts) {
+            Err(e) => {
+                // Only v* beyond the exact predicates' range are refused, with a clear error.
+                prop_assert!(beyond && e.to_string().contains("rescale the input"), "{}", e);
+                return Ok(());
+            }
+            Ok(out) => out,
+        };
+        prop_assert!(!beyond, "v* beyond {:e} meshed", MAX_COORDINATE);
         if out.mesh.faces.is_empty() {
             prop_assert!(out.message.is_some());
         } else {

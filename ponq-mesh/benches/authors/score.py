@@ -33,4 +33,8 @@ for kind in KINDS:
 for kind in KINDS[1:]:
     better = sum(1 for o in va if o[kind][0]['ef1'] >= o['authors'][0]['ef1'])
     ecdb = sum(1 for o in va if o[kind][0]['ecd_x1e2'] <= o['authors'][0]['ecd_x1e2'])
-    print(f"{kind}: EF1 >= authors' on {better}/{len(va)}, ECD <= authors' on {ecdb}/{len(va)}; valid on {sum(1 for _, o in rows if o[kind][1])}/{len(rows)}, authors' on {len(va)}/{len(rows)}")
+    # Within the metric's noise: EF1 down to 0.0005 below theirs (the sampling seed moves EF1 by
+    # about 0.0004), ECD up to 5% above theirs.
+    better_n = sum(1 for o in va if o[kind][0]['ef1'] >= o['authors'][0]['ef1'] - 0.0005)
+    ecdb_n = sum(1 for o in va if o[kind][0]['ecd_x1e2'] <= o['authors'][0]['ecd_x1e2'] * 1.05 + 1e-5)
+    print(f"{kind}: EF1 >= authors' on {better}/{len(va)} ({better_n} within noise), ECD <= authors' on {ecdb}/{len(va)} ({ecdb_n} within noise); valid on {sum(1 for _, o in rows if o[kind][1])}/{len(rows)}, authors' on {len(va)}/{len(rows)}")

@@ -250,22 +250,26 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
                 .unzip(),
         }
     };
-    if let Some(i) = vstars.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-        return Err(Error::InvalidInput(format!("v*[{i}] is not finite")));
-    }
+    // One pass for both checks (NaN fails the comparison too).
     if let Some(i) = vstars
         .iter()
-        .position(|p| p.iter().any(|c| c.abs() > MAX_COORDINATE))
+        .position(|p| p.iter().any(|c| !(c.abs() <= MAX_COORDINATE)))
     {
-        return Err(Error::InvalidInput(format!(
-            "v*[{i}] = {:?} is beyond +-{MAX_COORDINATE:e} (PoNQs live in [-1, 1]^3: rescale \
-             the input)",
-            vstars[i]
-        )));
+        return Err(Error::InvalidInput(
+            if vstars[i].iter().any(|c| !c.is_finite()) {
+                format!("v*[{i}] is not finite")
+            } else {
+                format!(
+                    "v*[{i}] = {:?} is beyond +-{MAX_COORDINATE:e} (PoNQs live in [-1, 1]^3: \
+                     rescale the input)",
+                    vstars[i]
+                )
+            },
+        ));
     }
     stats.times.prepare = t0.elapsed();
     let m = ponq.len();
-    let weld_tol = opts.weld * (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
+    let weld_tol = opts.weld * extent;
     if !(opts.weld >= 0.0 && weld_tol.is_finite()) {
         return Err(Error::InvalidInput(format!(
             "the weld tolerance must be a finite number >= 0, got {}",

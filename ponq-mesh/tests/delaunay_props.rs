@@ -94,6 +94,19 @@ fn check_empty_spheres(dt: &Delaunay) {
     }
 }
 
+/// The `m`^3 lattice `step * (i, j, k)`, `i` slowest.
+fn lattice(m: usize, step: f64) -> Vec<[f64; 3]> {
+    let mut pts = Vec::with_capacity(m * m * m);
+    for i in 0..m {
+        for j in 0..m {
+            for k in 0..m {
+                pts.push([i as f64 * step, j as f64 * step, k as f64 * step]);
+            }
+        }
+    }
+    pts
+}
+
 fn hull_box_volume(pts: &[[f64; 3]]) -> f64 {
     let mut lo = [f64::MAX; 3];
     let mut hi = [f64::MIN; 3];
@@ -140,14 +153,7 @@ fn random_points_in_a_box_fill_the_box() {
 #[test]
 fn lattice_is_triangulated_without_flat_tets() {
     // 6^3 lattice: every cell's 8 corners are co-spherical.
-    let mut pts = Vec::new();
-    for i in 0..6 {
-        for j in 0..6 {
-            for k in 0..6 {
-                pts.push([i as f64 * 0.2, j as f64 * 0.2, k as f64 * 0.2]);
-            }
-        }
-    }
+    let pts = lattice(6, 0.2);
     let dt = Delaunay::new(&pts).unwrap();
     let vol = check_structure(&dt);
     assert!((vol - hull_box_volume(&pts)).abs() < 1e-9, "volume {vol}");
@@ -325,15 +331,7 @@ fn parallel_insertion_gives_the_same_triangulation() {
     }
     inputs.push(("surfaces", surface));
     // An exact lattice: every cell co-spherical, every insphere decision a symbolic tie.
-    let mut lattice = Vec::new();
-    for i in 0..22 {
-        for j in 0..22 {
-            for k in 0..22 {
-                lattice.push([i as f64 * 0.25, j as f64 * 0.25, k as f64 * 0.25]);
-            }
-        }
-    }
-    inputs.push(("lattice", lattice));
+    inputs.push(("lattice", lattice(22, 0.25)));
     // A coarse grid-snapped cloud: duplicates and ties everywhere.
     let snapped: Vec<[f64; 3]> = (0..15_000)
         .map(|_| [0, 1, 2].map(|_| rng.random_range(-20i32..=20) as f64 / 20.0))
@@ -458,14 +456,7 @@ fn near_points_merge_only_when_asked() {
 /// were a rounding away from, and the triangulation stays exact.
 #[test]
 fn tiny_coordinates_are_snapped_to_zero() {
-    let mut pts = Vec::new();
-    for i in 0..5 {
-        for j in 0..5 {
-            for k in 0..5 {
-                pts.push([i as f64 * 0.25, j as f64 * 0.25, k as f64 * 0.25]);
-            }
-        }
-    }
+    let mut pts = lattice(5, 0.25);
     let n = pts.len();
     // Copies of (0, 0, 0), (0.25, 0, 0) and (0, 0.5, 0.25) a tiny amount away.
     pts.push([5e-324, 0.0, 0.0]);
@@ -516,13 +507,7 @@ fn tiny_and_huge_point_sets_give_the_unscaled_triangulation() {
         })
         .collect();
     // And a lattice part: exactly co-spherical points, decided by the symbolic perturbation.
-    for i in 0..8 {
-        for j in 0..8 {
-            for k in 0..8 {
-                pts.push([i as f64 * 0.0625, j as f64 * 0.0625, k as f64 * 0.0625]);
-            }
-        }
-    }
+    pts.extend(lattice(8, 0.0625));
     let plain = Delaunay::new(&pts).unwrap();
     check_locally_delaunay(&plain);
     for scale in [2f64.powi(-1000), 2f64.powi(1000), 2f64.powi(-1070)] {

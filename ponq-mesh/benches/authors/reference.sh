@@ -19,7 +19,11 @@ for p in "$ref"/*_[36][24].npz; do
   s=$(basename "${p%.npz}")
   r=${s##*_}
   cp "$ref/$s.authors.obj" "$out/$s.authors.obj"
-  "$bin/ponq-mesh" "$p" -o "$out/$s.ours.obj" --grid-scale "$r" -q
+  # Their mesher's time, from the table of the reference files' README.
+  awk -F'|' -v s="$s" '$2 ~ "^ *"s" *$" {gsub(/ /, "", $5); print $5}' "$ref/README.md" > "$out/$s.authors.seconds"
+  # Our meshing time (the `meshing total` ponq-mesh prints: no reading, writing or check).
+  "$bin/ponq-mesh" "$p" -o "$out/$s.ours.obj" --grid-scale "$r" --no-check |
+    sed -n 's/.*meshing total \([0-9.]*\).*/\1/p' > "$out/$s.ours.ms"
   "$bin/ponq-mesh" "$p" -o "$out/$s.noflip.obj" --grid-scale "$r" --no-crease-flips -q
   "$bin/ponq-mesh" "$p" -o "$out/$s.paper.obj" --grid-scale "$r" --small-tets-both-ways -q
 done

@@ -3,7 +3,10 @@
 a Markdown table (ponq-eval compare --json against the source mesh, found by name anywhere under
 MESH_DIR; ponq-eval check for validity) and means over the files where the authors' output is
 valid. Kinds: authors, ours (default), noflip (--no-crease-flips), paper (--small-tets-both-ways:
-the small-tet rule of the paper's text, the mesher's rule before 2026-12-03)."""
+the small-tet rule of the paper's text, the mesher's rule before 2026-12-03). Then a compact
+table of the authors' output against ours (EF1 / ECD / validity / meshing time; the times come
+from the scripts' NAME.authors.seconds and NAME.ours.ms files where present: one fresh process
+each, on a shared machine)."""
 import json, subprocess, sys, glob, os
 out_dir, M, exe = sys.argv[1], sys.argv[2], sys.argv[3]
 src = {os.path.basename(p)[:-4]: p for p in glob.glob(M + '/**/*.obj', recursive=True)}
@@ -25,6 +28,21 @@ print('| file | authors: CD / F1 / NC / ECD / EF1 | ponq-mesh (default) | ponq-m
 print('|---|---|---|---|---|')
 for stem, o in rows:
     print(f"| {stem} | {fmt(*o['authors'])} | {fmt(*o['ours'])} | {fmt(*o['noflip'])} | {fmt(*o['paper'])} |")
+def read_time(path, scale):
+    try:
+        return float(open(path).read().split()[0]) * scale
+    except (OSError, ValueError, IndexError):
+        return None
+ms = lambda t: '-' if t is None else (f'{t:.0f} ms' if t >= 10 else f'{t:.1f} ms')
+short = lambda j, v: f"{j['ef1']:.4f} / {j['ecd_x1e2']:.4f}, {'valid' if v else '**not valid**'}"
+print()
+print('| file | authors: EF1 / ECD x1e2, validity | time | ponq-mesh (default) | time |')
+print('|---|---|---:|---|---:|')
+for stem, o in rows:
+    ta = read_time(f'{out_dir}/{stem}.authors.seconds', 1e3)
+    to = read_time(f'{out_dir}/{stem}.ours.ms', 1.0)
+    print(f"| {stem} | {short(*o['authors'])} | {ms(ta)} | {short(*o['ours'])} | {ms(to)} |")
+print()
 # Summary over files where the authors' output is valid.
 va = [o for _, o in rows if o['authors'][1]]
 for kind in KINDS:

@@ -33,8 +33,12 @@ for m in "${meshes[@]}"; do
   for r in 32 64; do
     p="$out/${n}_$r.npz"
     [ -f "$p" ] || "$bin/ponq-fit" "$src/$m.obj" -o "$out/fit.obj" --grid "$r" --save-ponq "$p" -q
-    echo "$n $r authors: $("$py" "$here/authors_mesh.py" "$p" "$r" "$out/${n}_$r.authors.obj" | tail -1)"
-    "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.ours.obj" --grid-scale "$r" -q
+    a=$("$py" "$here/authors_mesh.py" "$p" "$r" "$out/${n}_$r.authors.obj" | tail -1)
+    echo "$n $r authors: $a"
+    echo "${a##* }" > "$out/${n}_$r.authors.seconds"
+    # Our meshing time (the `meshing total` ponq-mesh prints: no reading, writing or check).
+    "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.ours.obj" --grid-scale "$r" --no-check |
+      sed -n 's/.*meshing total \([0-9.]*\).*/\1/p' > "$out/${n}_$r.ours.ms"
     "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.noflip.obj" --grid-scale "$r" --no-crease-flips -q
     "$bin/ponq-mesh" "$p" -o "$out/${n}_$r.paper.obj" --grid-scale "$r" --small-tets-both-ways -q
   done

@@ -5,7 +5,9 @@
 #
 #   AUTHORS_PONQ=/path/to/PoNQ/src/utils ponq-mesh/benches/authors/side_by_side.sh [OUT_DIR] [MESH ...]
 #
-# MESH: paths under ../shared/data/meshes/cad without .obj (default: the eight of the README).
+# MESH: paths under ../shared/data/meshes/cad without .obj (default: the eight of the README),
+# or one of the README's other sets by name: `holdout` (eight other CAD meshes) or `third` (ten
+# more, the set that checked the no-sliver flip rule).
 # Needs a checkout of the authors' repository (github.com/nissmar/PoNQ) and Debian's
 # python3-torch, python3-scipy, python3-networkx; release binaries (cargo build --release --bins).
 set -euo pipefail
@@ -14,6 +16,17 @@ here=ponq-mesh/benches/authors
 out=${1:-target/authors-side-by-side}
 shift || true
 meshes=("$@")
+if [ ${#meshes[@]} -eq 1 ] && [ "${meshes[0]}" = holdout ]; then
+  meshes=(openscad_examples/Old_example008 openscad_examples/Old_example011
+    openscad_examples/Old_example013 openscad_examples/Basics_CSG-modules
+    freecad_fcstd/fcstd_geomop_14 freecad_fcstd/fcstd_drilling_plate_final gmsh/gmsh_lever
+    freecad_step/freecad_idf_SOT23)
+elif [ ${#meshes[@]} -eq 1 ] && [ "${meshes[0]}" = third ]; then
+  meshes=(openscad_examples/Old_example009 openscad_examples/Old_example014
+    openscad_examples/Old_example016 openscad_examples/Old_example021 openscad_examples/Basics_CSG
+    openscad_examples/Parametric_candleStand freecad_fcstd/fcstd_toolbit_ballend
+    freecad_step/freecad_idf_SOT404 gmsh/gmsh_component8 pyvista/pyvista_nut)
+fi
 if [ ${#meshes[@]} -eq 0 ]; then
   meshes=(openscad_examples/Old_example002 openscad_examples/Old_example003
     openscad_examples/Old_example004 openscad_examples/Old_example005

@@ -1,4 +1,5 @@
-//! `ponq-eval run` on a tiny split against direct metric calls; how its inputs are found.
+//! `ponq-eval run` on a tiny split against direct metric calls; how its inputs are found;
+//! `ponq-eval compare`'s sharp-edge angle.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -215,4 +216,81 @@ fn eval_run_compares_models_and_groups() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--name"));
     std::fs::remove_dir_all(&d).ok();
+}
+
+/// A closed prism over the polygon of the given angles (degrees) on the unit circle, z in
+/// [-0.5, 0.5], outward-oriented, as OBJ text.
+fn prism_obj(angles: &[f64]) -> String {
+    let n = angles.len();
+    let mut s = String::new();
+    for z in [-0.5, 0.5] {
+        for a in angles {
+            let r = a.to_radians();
+            s += &format!("v {} {} {z}\n", r.cos(), r.sin());
+        }
+    }
+    // OBJ indices are 1-based: bottom ring 1..=n, top ring n+1..=2n.
+    let (b, t) = (|i: usize| i % n + 1, |i: usize| i % n + 1 + n);
+    for i in 1..n - 1 {
+        s += &format!("f {} {} {}\n", b(0), b(i + 1), b(i));
+        s += &format!("f {} {} {}\n", t(0), t(i), t(i + 1));
+    }
+    for i in 0..n {
+        s += &format!("f {} {} {}\n", b(i), b(i + 1), t(i + 1));
+        s += &format!("f {} {} {}\n", b(i), t(i + 1), t(i));
+    }
+    s
+}
+
+/// `compare --sharp-angle` decides which edges count: a hexagonal prism (vertical edges of 60
+/// degrees) against the rectangle prism on four of its corners (all edges 90 degrees). Below
+/// 60 degrees the truth has six vertical sharp edges and the prediction four of them; above,
+/// the truth has none and the prediction's four are extra, so the edge metrics differ. Bad
+/// angles are errors.
+#[test]
+fn compare_sharp_angle_sets_the_edges_that_count() {
+    let d = tmp("sharp-angle");
+    let (gt, pred) = (d.join("hexagon.obj"), d.join("rectangle.obj"));
+    std::fs::write(&gt, prism_obj(&[0.0, 60.0, 120.0, 180.0, 240.0, 300.0])).unwrap();
+    std::fs::write(&pred, prism_obj(&[0.0, 60.0, 180.0, 240.0])).unwrap();
+    let compare = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
+            .args([
+                "compare",
+                "--pred-frame",
+                "gt",
+                "--samples",
+                "20000",
+                "--json",
+            ])
+            .arg(&pred)
+            .arg(&gt)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let edge_metrics = |extra: &[&str]| -> (f64, f64) {
+        let o = compare(extra);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let out = String::from_utf8_lossy(&o.stdout).to_string();
+        let field = |k: &str| -> f64 {
+            let rest = &out[out.find(&format!("\"{k}\":")).unwrap() + k.len() + 3..];
+            rest[..rest.find([',', '}']).unwrap()].parse().unwrap()
+        };
+        (field("ecd_x1e2"), field("ef1"))
+    };
+    let default = edge_metrics(&[]);
+    assert_eq!(default, edge_metrics(&["--sharp-angle", "30"]));
+    assert_eq!(default, edge_metrics(&["--sharp-angle", "45"]));
+    let above = edge_metrics(&["--sharp-angle", "75"]);
+    assert_ne!(default, above);
+    // Above 60 degrees the prediction's vertical edges have no counterpart: more of its
+    // edge samples are far from the truth's.
+    assert!(above.0 > default.0, "ECD {} -> {}", default.0, above.0);
+    for bad in ["0", "180", "-5", "nan"] {
+        let o = compare(&[&format!("--sharp-angle={bad}")]);
+        assert_eq!(o.status.code(), Some(2), "--sharp-angle {bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--sharp-angle"));
+    }
+    let _ = std::fs::remove_dir_all(&d);
 }

@@ -63,6 +63,10 @@ enum Cmd {
         /// Sampling seed.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Dihedral angle in degrees above which an edge counts as sharp for ECD / EF1 (the
+        /// papers' 30; other values show how much a result hangs on edges near the threshold).
+        #[arg(long, default_value_t = 30.0, value_name = "DEG")]
+        sharp_angle: f64,
         /// Print one JSON object instead of a table.
         #[arg(long)]
         json: bool,
@@ -119,10 +123,14 @@ fn run(cli: Cli) -> Result<()> {
             pred_frame,
             samples,
             seed,
+            sharp_angle,
             json,
         } => {
             if samples == 0 {
                 bail!("--samples must be positive");
+            }
+            if !(sharp_angle > 0.0 && sharp_angle < 180.0) {
+                bail!("--sharp-angle must be in (0, 180) degrees, got {sharp_angle}");
             }
             let p = io::read_mesh(&pred).context("reading the predicted mesh")?;
             // Validity is checked on the file as written: mapping it to another frame rounds
@@ -144,6 +152,7 @@ fn run(cli: Cli) -> Result<()> {
                     surface_samples: samples,
                     edge_samples: samples,
                     seed,
+                    sharp_angle_deg: sharp_angle,
                     check_validity: false,
                     ..Default::default()
                 },

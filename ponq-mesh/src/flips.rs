@@ -81,6 +81,10 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
@@ -123,10 +127,10 @@ impl VertexData<'_> {
 fn score(mesh: &TriMesh, data: VertexData, h: f64, f: [u32; 3]) -> Option<(f64, f64)> {
     let p = f.map(|v| mesh.vertices[v as usize]);
     let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
-    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let len = dot(n, n).sqrt();
     let scale = [sub(p[1], p[0]), sub(p[2], p[1]), sub(p[0], p[2])]
         .iter()
-        .map(|e| e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        .map(|&e| dot(e, e))
         .fold(0.0, f64::max);
     if !(len > 1e-12 * scale) || !len.is_finite() {
         return None;
@@ -144,9 +148,7 @@ fn score(mesh: &TriMesh, data: VertexData, h: f64, f: [u32; 3]) -> Option<(f64, 
         .iter()
         .map(|&i| {
             let m = data.normal(i);
-            (n[0] * m[0] + n[1] * m[1] + n[2] * m[2])
-                .clamp(-1.0, 1.0)
-                .acos()
+            dot(n, m).clamp(-1.0, 1.0).acos()
         })
         .sum();
     Some((h * sq, (sn / NORMAL_SCALE).powi(2)))
@@ -199,10 +201,7 @@ fn well_shaped(mesh: &TriMesh, f: [u32; 3]) -> bool {
     let p = f.map(|v| mesh.vertices[v as usize]);
     (0..3).all(|i| {
         let (x, y) = (sub(p[(i + 1) % 3], p[i]), sub(p[(i + 2) % 3], p[i]));
-        let dot = x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
-        let xx = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
-        let yy = y[0] * y[0] + y[1] * y[1] + y[2] * y[2];
-        dot >= MAX_NEW_ANGLE_COS * (xx * yy).sqrt()
+        dot(x, y) >= MAX_NEW_ANGLE_COS * (dot(x, x) * dot(y, y)).sqrt()
     })
 }
 
@@ -694,23 +693,35 @@ mod tests {
     /// Across the crease of the planes z = 0 and y = 0 (the x axis), the diagonal from `u` on
     /// z = 0 to `v` on y = 0 goes to `a b` on the crease; not when `u` or `v` is itself a
     /// crease vertex (its quadric holds both planes), and not on a flat quadrilateral.
-    #[test]
-    fn quadric_test_flips_smooth_diagonals_onto_creases_only() {
+    /// The quadrics of the planes z = 0 and y = 0 and of their crease (the x axis: both).
+    fn crease_quadrics() -> (Quadric, Quadric, Quadric) {
         let (pz, py) = (
             Quadric::from_plane([0.0; 3], [0.0, 0.0, 1.0]),
             Quadric::from_plane([0.0; 3], [0.0, 1.0, 0.0]),
         );
         let mut crease = pz;
         crease += py;
-        let mesh = TriMesh {
+        (pz, py, crease)
+    }
+
+    /// The triangles `(u, v, a)`, `(v, u, b)` (vertices 0, 1, 2, 3) across that crease: `u` on
+    /// z = 0 at distance `d` from it, `v` on y = 0, `a` and `b` on it.
+    fn crease_quad(d: f64) -> TriMesh {
+        TriMesh {
             vertices: vec![
-                [0.0, -1.0, 0.0],
+                [0.0, -d, 0.0],
                 [0.0, 0.0, -1.0],
                 [-1.0, 0.0, 0.0],
                 [1.0, 0.0, 0.0],
             ],
             faces: vec![[0, 1, 2], [1, 0, 3]],
-        };
+        }
+    }
+
+    #[test]
+    fn quadric_test_flips_smooth_diagonals_onto_creases_only() {
+        let (pz, py, crease) = crease_quadrics();
+        let mesh = crease_quad(1.0);
         let normals = vec![[0.0, 0.0, 1.0]; 4];
         let test = |q: [Quadric; 4]| {
             let data = VertexData {
@@ -745,27 +756,13 @@ mod tests {
             assert_eq!(well_shaped(&deg(t), [0, 1, 2]), ok, "{t} degrees");
             assert_eq!(well_shaped(&deg(t), [2, 0, 1]), ok, "{t} degrees");
         }
-        // The crease of the planes z = 0 and y = 0 (the x axis); `u` on z = 0 at distance `d`
-        // from it, `v` on y = 0.
-        let (pz, py) = (
-            Quadric::from_plane([0.0; 3], [0.0, 0.0, 1.0]),
-            Quadric::from_plane([0.0; 3], [0.0, 1.0, 0.0]),
-        );
-        let mut crease = pz;
-        crease += py;
+        // Across the crease of `crease_quad`, `u` at distance `d` from it.
+        let (pz, py, crease) = crease_quadrics();
         let q = [pz, py, crease, crease];
         let s = std::f64::consts::FRAC_1_SQRT_2;
         let normals = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, s, s], [0.0, s, s]];
         let flips = |d: f64| {
-            let mesh = TriMesh {
-                vertices: vec![
-                    [0.0, -d, 0.0],
-                    [0.0, 0.0, -1.0],
-                    [-1.0, 0.0, 0.0],
-                    [1.0, 0.0, 0.0],
-                ],
-                faces: vec![[0, 1, 2], [1, 0, 3]],
-            };
+            let mesh = crease_quad(d);
             let data = VertexData {
                 quadrics: &q,
                 normals: &normals,
@@ -798,7 +795,7 @@ mod tests {
         ];
         // Rodrigues' rotation about the unit axis k.
         let rot = |v: [f64; 3]| -> [f64; 3] {
-            let kv = k[0] * v[0] + k[1] * v[1] + k[2] * v[2];
+            let kv = dot(k, v);
             let x = cross(k, v);
             std::array::from_fn(|i| v[i] * c + x[i] * s + k[i] * kv * (1.0 - c))
         };
@@ -848,7 +845,7 @@ mod tests {
             .iter()
             .map(|&s| {
                 let m = ponq.normals[s as usize];
-                let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt().max(1e-30);
+                let l = dot(m, m).sqrt().max(1e-30);
                 m.map(|x| x / l)
             })
             .collect();

@@ -118,27 +118,29 @@ fn main() {
     }
     let threads = rayon::current_num_threads();
     println!(
-        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | deferred |"
+        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | deferred | rebuilds |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
         let time = |workers: usize| {
             let mut best = f64::MAX;
             let mut tets = 0;
             let mut deferred = 0;
+            let mut rebuilds = 0;
             for _ in 0..5 {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers).expect("finite points");
                 best = best.min(t.elapsed().as_secs_f64());
                 tets = dt.tets.len();
                 deferred = dt.stats.deferred;
+                rebuilds = dt.stats.rebuilds;
             }
-            (best, tets, deferred)
+            (best, tets, deferred, rebuilds)
         };
-        let (one, tets, _) = time(1);
-        let (all, _, deferred) = time(threads);
+        let (one, tets, _, _) = time(1);
+        let (all, _, deferred, rebuilds) = time(threads);
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {deferred} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {deferred} | {rebuilds} |",
             pts.len(),
             one * 1e3,
             one * 1e6 / pts.len() as f64,

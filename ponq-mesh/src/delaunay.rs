@@ -30,8 +30,28 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize};
 
 use crate::error::{Error, Result};
 use crate::predicates::{
-    in_conflict_bounded, orient3d, orient3d_bounded, static_insphere_bound, static_orient_bound,
+    collinear, in_conflict_bounded, orient3d, orient3d_bounded, static_insphere_bound,
+    static_orient_bound,
 };
+
+/// The sizes tried for the super-tetrahedron, in extents of the input, smallest first.
+///
+/// The insertion starts from one tetrahedron around all points. Its four vertices are real
+/// points, so a Delaunay tet of the input whose circumsphere reaches one of them is missing
+/// from the result: the flat tets along the convex hull, whose circumspheres can be huge (at
+/// 1000 extents, 13,870 of the 123,443 tets of 20k random points in a 1 x 1 x 1e-6 slab were
+/// missing, and 27 of 672k for random points in a cube). So the result is checked
+/// ([`Builder::fills_hull`]: its boundary must be closed, convex and through every vertex that
+/// touches the super-tetrahedron's tets) and built again with the next size when it is not.
+/// 2^30 suffices for everything measured (CGAL's tet counts on random, slab, paraboloid,
+/// sphere and PoNQ point sets); the larger sizes keep the predicates' products in the range
+/// of `f64` (the largest, 2^150 extents of at most 2^11, gives products below 2^810), where
+/// the exact stages decide what the filters cannot.
+const SUPER_SCALES: [f64; 3] = [
+    (1u64 << 30) as f64,
+    (1u128 << 90) as f64,
+    (1u128 << 90) as f64 * (1u64 << 60) as f64,
+];
 
 /// Marker for "no neighbour" (a face on the boundary of the triangulated region).
 pub const NONE: u32 = u32::MAX;
@@ -40,8 +60,8 @@ pub const NONE: u32 = u32::MAX;
 ///
 /// Invariants: every tet `tets[t]` is positively oriented (`orient3d > 0`, never flat);
 /// `neighbors[t][k]` is the tet sharing the face opposite `tets[t][k]`, or [`NONE`] on the
-/// boundary; adjacency is symmetric. The union of the tets is (up to slivers along the convex
-/// hull) the convex hull of the vertices; the mesher always adds an enclosing box.
+/// convex hull; adjacency is symmetric. The union of the tets is the convex hull of the
+/// vertices (when they are not all in one plane), and every vertex is in a tet.
 #[derive(Debug, Clone, Default)]
 pub struct Delaunay {
     /// The distinct input points (exact duplicates merged; the first occurrence is kept).
@@ -77,6 +97,9 @@ pub struct DelaunayStats {
     /// Points with a coordinate set to 0 because it was too small next to the largest
     /// coordinate for exact predicates (see [`Delaunay::with_options`]).
     pub snapped: usize,
+    /// Times the triangulation was built again with a larger super-tetrahedron because the
+    /// first one cut tets off along the convex hull (almost always 0).
+    pub rebuilds: usize,
 }
 
 /// Options of [`Delaunay::with_options`].
@@ -479,9 +502,26 @@ impl Delaunay {
         // Number the vertices in insertion order inside the builder, so that consecutive
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (order, rounds) = brio_order(&hilbert);
-        let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
-        let capacity = 8 * sorted.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
-        let mut dt = Builder::new(sorted, order.clone(), capacity)?.run(&rounds, opts);
+        let capacity = 8 * vertices.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
+        let mut built = None;
+        for (attempt, &scale) in SUPER_SCALES.iter().enumerate() {
+            let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
+            let (mut dt, filled) =
+                Builder::new(sorted, order.clone(), capacity, scale)?.run(&rounds, opts);
+            dt.stats.rebuilds = attempt;
+            if filled {
+                built = Some(dt);
+                break;
+            }
+        }
+        let Some(mut dt) = built else {
+            return Err(Error::InvalidInput(format!(
+                "the {} points are too close to a plane for an exact tetrahedralisation: a \
+                 super-tetrahedron 2^150 times their extent still cuts off tets along the \
+                 convex hull",
+                vertices.len()
+            )));
+        };
         dt.tets
             .par_iter_mut()
             .for_each(|tet| *tet = tet.map(|v| order[v as usize]));
@@ -1284,9 +1324,15 @@ struct Builder {
 }
 
 impl Builder {
-    /// A builder with the super-tetrahedron and a zeroed arena of `capacity` slots (more are
-    /// added when needed).
-    fn new(mut pos: Vec<[f64; 3]>, rank: Vec<u32>, capacity: usize) -> Result<Self> {
+    /// A builder with the super-tetrahedron (`super_scale` times the input's extent from its
+    /// centre, see [`SUPER_SCALES`]) and a zeroed arena of `capacity` slots (more are added
+    /// when needed).
+    fn new(
+        mut pos: Vec<[f64; 3]>,
+        rank: Vec<u32>,
+        capacity: usize,
+        super_scale: f64,
+    ) -> Result<Self> {
         let n_real = pos.len() as u32;
         let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
         if let Some(first) = pos.first() {
@@ -1311,7 +1357,7 @@ impl Builder {
         let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
         let static_eps = static_insphere_bound(extent);
         let static_orient_eps = static_orient_bound(extent);
-        let s = 1000.0 * r;
+        let s = super_scale * r;
         pos.push([c[0] - s, c[1] - s, c[2] - s]);
         pos.push([c[0] + 3.0 * s, c[1] - s, c[2] - s]);
         pos.push([c[0] - s, c[1] + 3.0 * s, c[2] - s]);
@@ -1402,7 +1448,9 @@ impl Builder {
     /// `threads` workers, each owning one stretch of every round's Hilbert order in chunks
     /// (and taking other workers' chunks once its own are done), then the vertices the
     /// workers backed off from by one thread.
-    fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> Delaunay {
+    ///
+    /// Also returns whether the tets fill the convex hull ([`Builder::fills_hull`]).
+    fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> (Delaunay, bool) {
         let n = self.n_real as usize;
         let mut main = Worker::new(1, 12345);
         let threads = opts.threads.clamp(1, 64);
@@ -1573,7 +1621,9 @@ impl Builder {
     /// later stages, which read the tets in order with their vertices and neighbours, run
     /// faster than with the tets sorted by smallest vertex (measured: the whole mesher 9%
     /// faster at 100k points), and the sort itself writes more nearly in order.
-    fn finish(self, stats: DelaunayStats) -> Delaunay {
+    ///
+    /// Also returns whether the tets fill the convex hull ([`Builder::fills_hull`]).
+    fn finish(self, stats: DelaunayStats) -> (Delaunay, bool) {
         use rayon::prelude::*;
         let n = self.n_real;
         let arena = &self.tets[..self.used];
@@ -1590,6 +1640,7 @@ impl Builder {
                 }
             })
             .collect();
+        let filled = self.fills_hull(&key);
         // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
@@ -1680,13 +1731,114 @@ impl Builder {
         });
         let mut vertices = self.pos;
         vertices.truncate(n as usize);
-        Delaunay {
+        let dt = Delaunay {
             vertices,
             vertex_of_point: Vec::new(),
             tets,
             neighbors,
             stats,
+        };
+        (dt, filled)
+    }
+
+    /// Whether the tets of real vertices fill the convex hull of the real vertices (see
+    /// [`SUPER_SCALES`] for when they do not). `key[t]` is [`NONE`] exactly for the free slots
+    /// and the live tets with a vertex of the super-tetrahedron (the shell around the others).
+    ///
+    /// The boundary of the real tets is the faces they share with the shell, each with the
+    /// shell's side as its outside. The real tets fill the hull iff that boundary is closed
+    /// (every directed edge of a face is met once, reversed, by another face), connected and
+    /// convex at every edge (no face's third vertex strictly outside the plane of the face
+    /// across the edge), and passes through every real vertex of the shell (a vertex in no
+    /// real tet is one of those). A closed connected surface convex at every edge bounds a
+    /// convex body (the real tets, which hold every vertex, so the hull); conversely the
+    /// hull's boundary passes all the checks. Costs a look at the shell (about as many tets
+    /// as the hull has faces), not at the whole arena. With no real tet at all, the answer
+    /// is whether the points span no volume.
+    fn fills_hull(&self, key: &[u32]) -> bool {
+        use rayon::prelude::*;
+        let n = self.n_real;
+        let arena = &self.tets[..self.used];
+        let shell: Vec<u32> = key
+            .par_iter()
+            .enumerate()
+            .filter(|&(t, &k)| k == NONE && arena[t].mark() != DEAD)
+            .map(|(t, _)| t as u32)
+            .collect();
+        let mut faces: Vec<[u32; 3]> = Vec::new();
+        let mut touched: Vec<u32> = Vec::new();
+        for &t in &shell {
+            let (tv, tn) = (arena[t as usize].verts(), arena[t as usize].nbrs());
+            touched.extend(tv.iter().copied().filter(|&v| v < n));
+            if tv.iter().filter(|&&v| v >= n).count() == 1 {
+                let k = tv.iter().position(|&v| v >= n).unwrap_or(0);
+                let nb = tn[k];
+                if nb != NONE && key[nb as usize] != NONE {
+                    // `APEX_FACE[k]` order: the shell's vertex `k` is on the positive side.
+                    faces.push(APEX_FACE[k].map(|q| tv[q]));
+                }
+            }
         }
+        if faces.is_empty() {
+            return !self.spans_volume();
+        }
+        // Directed edges (from, to, face), sorted for lookups.
+        let mut edges: Vec<(u32, u32, u32)> = faces
+            .iter()
+            .enumerate()
+            .flat_map(|(i, f)| (0..3).map(move |j| (f[j], f[(j + 1) % 3], i as u32)))
+            .collect();
+        edges.sort_unstable();
+        if edges
+            .windows(2)
+            .any(|w| (w[0].0, w[0].1) == (w[1].0, w[1].1))
+        {
+            return false;
+        }
+        let mut root: Vec<u32> = (0..faces.len() as u32).collect();
+        fn find(root: &mut [u32], mut x: u32) -> u32 {
+            while root[x as usize] != x {
+                root[x as usize] = root[root[x as usize] as usize];
+                x = root[x as usize];
+            }
+            x
+        }
+        let p = |v: u32| &self.pos[v as usize];
+        for &(x, y, i) in &edges {
+            let Ok(e) = edges.binary_search_by(|e| (e.0, e.1).cmp(&(y, x))) else {
+                return false;
+            };
+            let (f, g) = (faces[i as usize], faces[edges[e].2 as usize]);
+            let w = g.iter().copied().find(|&v| v != x && v != y).unwrap_or(x);
+            if orient3d(p(f[0]), p(f[1]), p(f[2]), p(w)) > 0 {
+                return false;
+            }
+            let (a, b) = (find(&mut root, i), find(&mut root, edges[e].2));
+            root[a as usize] = b;
+        }
+        let first = find(&mut root, 0);
+        if (1..faces.len() as u32).any(|i| find(&mut root, i) != first) {
+            return false;
+        }
+        let mut on_boundary: Vec<u32> = faces.iter().flatten().copied().collect();
+        on_boundary.sort_unstable();
+        on_boundary.dedup();
+        touched.iter().all(|v| on_boundary.binary_search(v).is_ok())
+    }
+
+    /// Whether four of the real points are affinely independent (exactly).
+    fn spans_volume(&self) -> bool {
+        let pts = &self.pos[..self.n_real as usize];
+        let Some(a) = pts.first() else {
+            return false;
+        };
+        let Some(b) = pts.iter().find(|&q| q != a) else {
+            return false;
+        };
+        let Some(c) = pts.iter().find(|&q| !collinear(a, b, q)) else {
+            return false;
+        };
+        pts.iter().any(|d| orient3d(a, b, c, d) != 0)
     }
 }
 

@@ -120,6 +120,15 @@ fn orient3d_exact(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i32
     }
 }
 
+/// Whether `a`, `b` and `c` lie on one line (exactly: the three coordinate-plane projections
+/// of the triangle all have zero signed area). Equal points are collinear.
+pub fn collinear(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3]) -> bool {
+    [(0, 1), (1, 2), (2, 0)].iter().all(|&(i, j)| {
+        let q = |p: &[f64; 3]| robust::Coord { x: p[i], y: p[j] };
+        robust::orient2d(q(a), q(b), q(c)) == 0.0
+    })
+}
+
 /// Exact sign of the insphere determinant for a positively oriented tetrahedron `(a, b, c, d)`:
 /// `1` if `e` is strictly inside its circumsphere, `-1` strictly outside, `0` on it.
 ///
@@ -609,6 +618,31 @@ mod tests {
     const X: [f64; 3] = [1.0, 0.0, 0.0];
     const Y: [f64; 3] = [0.0, 1.0, 0.0];
     const Z: [f64; 3] = [0.0, 0.0, 1.0];
+
+    #[test]
+    fn collinear_is_exact() {
+        let third = 1.0 / 3.0;
+        assert!(collinear(&O, &X, &[2.0, 0.0, 0.0]));
+        assert!(collinear(&O, &O, &Y));
+        assert!(collinear(
+            &[1.0, 2.0, 3.0],
+            &[2.0, 4.0, 6.0],
+            &[-0.5, -1.0, -1.5]
+        ));
+        assert!(!collinear(&O, &X, &Y));
+        // One ulp off the line through the origin and (1, 1/3, 1/3).
+        assert!(collinear(
+            &O,
+            &[1.0, third, third],
+            &[2.0, 2.0 * third, 2.0 * third]
+        ));
+        let off = f64::from_bits((2.0 * third).to_bits() + 1);
+        assert!(!collinear(
+            &O,
+            &[1.0, third, third],
+            &[2.0, off, 2.0 * third]
+        ));
+    }
 
     #[test]
     fn orientation_convention() {

@@ -536,3 +536,108 @@ fn tiny_and_huge_point_sets_give_the_unscaled_triangulation() {
         }
     }
 }
+
+/// The tets fill the convex hull of the vertices: every vertex is in a tet, and no vertex is
+/// strictly outside a boundary face (a face without neighbour, seen from its tet's fourth
+/// vertex); brute force with exact orientations.
+fn check_fills_hull(dt: &Delaunay) {
+    let p = |v: u32| &dt.vertices[v as usize];
+    let mut used = vec![false; dt.vertices.len()];
+    for (t, tv) in dt.tets.iter().enumerate() {
+        tv.iter().for_each(|&v| used[v as usize] = true);
+        for k in 0..4 {
+            if dt.neighbors[t][k] != NONE {
+                continue;
+            }
+            let f: Vec<u32> = (0..4).filter(|&j| j != k).map(|j| tv[j]).collect();
+            // The tet's own vertex `k` is on the inner side.
+            let inner = orient3d(p(f[0]), p(f[1]), p(f[2]), p(tv[k]));
+            for (i, q) in dt.vertices.iter().enumerate() {
+                assert!(
+                    orient3d(p(f[0]), p(f[1]), p(f[2]), q) != -inner,
+                    "vertex {i} is outside the boundary face {f:?} of tet {t}: a hull tet is missing"
+                );
+            }
+        }
+    }
+    assert!(used.iter().all(|&u| u), "a vertex is in no tet");
+}
+
+/// Points whose convex hull has nearly coplanar faces: the flat tets along it have huge
+/// circumspheres, which a super-tetrahedron 1000 extents wide cut off (2,000 points in a
+/// 1 x 1 x 1e-6 slab lost a third of their tets that way), and which random points in a cube
+/// lose a few of. Checked against the hull by brute force, on one and two threads.
+#[test]
+fn tets_fill_the_convex_hull() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut sets: Vec<(&str, Vec<[f64; 3]>)> = Vec::new();
+    for (name, thickness) in [("cube", 1.0), ("slab 1e-3", 1e-3), ("slab 1e-6", 1e-6)] {
+        let pts = (0..2000)
+            .map(|_| {
+                [
+                    rng.random_range(0.0..1.0),
+                    rng.random_range(0.0..1.0),
+                    rng.random_range(0.0..thickness),
+                ]
+            })
+            .collect();
+        sets.push((name, pts));
+    }
+    // A paraboloid cap: every point on the hull, neighbouring faces nearly coplanar.
+    let cap = (0..1500)
+        .map(|_| {
+            let (x, y): (f64, f64) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            [x, y, 1e-4 * (x * x + y * y)]
+        })
+        .collect();
+    sets.push(("paraboloid", cap));
+    for (name, pts) in &sets {
+        for threads in [1, 2] {
+            let dt = Delaunay::with_threads(pts, threads).unwrap();
+            check_structure(&dt);
+            check_fills_hull(&dt);
+            assert_eq!(dt.stats.rebuilds, 0, "{name}");
+        }
+        let dt = Delaunay::new(pts).unwrap();
+        check_empty_spheres(&dt);
+    }
+}
+
+/// A slab 1e-12 thick needs a super-tetrahedron larger than the first one tried (2^30
+/// extents): the first result fails the hull check and the points are triangulated again.
+/// Four points of a tet 1e-30 or 1e-40 high (its circumradius up to ~2^133 extents) need the
+/// largest. (Beyond it, `Delaunay::new` returns an error rather than a triangulation with a
+/// missing tet; flat tets that thin are not found with coordinates of one magnitude: a
+/// coordinate below 2^-140 of the largest is set to 0 first.)
+#[test]
+fn flat_point_sets_are_triangulated_again_with_a_larger_super_tetrahedron() {
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let slab: Vec<[f64; 3]> = (0..600)
+        .map(|_| {
+            [
+                rng.random_range(0.0..1.0),
+                rng.random_range(0.0..1.0),
+                rng.random_range(0.0..1e-12),
+            ]
+        })
+        .collect();
+    for threads in [1, 2] {
+        let dt = Delaunay::with_threads(&slab, threads).unwrap();
+        assert_eq!(dt.stats.rebuilds, 1);
+        check_structure(&dt);
+        check_fills_hull(&dt);
+    }
+    let flat = |h: f64| {
+        [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.3, 0.3, h],
+        ]
+    };
+    for h in [1e-30, 1e-40] {
+        let dt = Delaunay::new(&flat(h)).unwrap();
+        assert_eq!((dt.tets.len(), dt.stats.rebuilds), (1, 2), "height {h}");
+        check_fills_hull(&dt);
+    }
+}

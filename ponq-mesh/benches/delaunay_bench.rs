@@ -78,6 +78,20 @@ fn write_points(path: &Path, pts: &[[f64; 3]]) {
     std::fs::write(path, bytes).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
 }
 
+const USAGE: &str = "\
+Delaunay alone: one worker, then one per rayon thread (RAYON_NUM_THREADS), best of 5.
+
+usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [FILE ...]
+
+  FILE         a point file (raw little-endian f64 x, y, z triples) or a PoNQ .npz (its v*);
+               without files: random points (10k, 100k, 400k), lattices (30^3, 47^3) and the
+               example PoNQ's v*. Cargo runs benches in the package folder: give absolute paths.
+  --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
+  -h, --help   this text
+
+Columns: tets, time and microseconds per point on one and on all threads, vertices deferred
+to the final one-thread pass, rebuilds with a larger super-tetrahedron.";
+
 fn main() {
     let args: Vec<String> = std::env::args()
         .skip(1)
@@ -87,10 +101,23 @@ fn main() {
     let mut files = Vec::new();
     let mut it = args.iter();
     while let Some(a) = it.next() {
-        if a == "--write" {
-            write_dir = it.next().map(PathBuf::from);
-        } else {
-            files.push(PathBuf::from(a));
+        match a.as_str() {
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                return;
+            }
+            "--write" => match it.next() {
+                Some(dir) => write_dir = Some(PathBuf::from(dir)),
+                None => {
+                    eprintln!("error: --write needs a folder\n\n{USAGE}");
+                    std::process::exit(2);
+                }
+            },
+            flag if flag.starts_with('-') => {
+                eprintln!("error: unknown option {flag}\n\n{USAGE}");
+                std::process::exit(2);
+            }
+            _ => files.push(PathBuf::from(a)),
         }
     }
     let sets: Vec<(String, Vec<[f64; 3]>)> = if files.is_empty() {

@@ -53,10 +53,37 @@ fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize) {
     );
 }
 
+const USAGE: &str = "\
+Meshing benchmark: synthetic CAD-like PoNQs (grids 32, 72, 145, 230: ~2k to ~109k points),
+the time of each meshing stage (best of N after a warm-up run) and of the validity check.
+
+usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N] [--save DIR] [FILE.npz ...]
+
+  --grid G      only this synthetic grid (repeatable)
+  --repeat N    best of N runs (default 3): a long run for a profiler
+  --save DIR    also write each synthetic PoNQ as DIR/synthetic_G.npz (for another build's
+                ponq-mesh: benches/mesh_side_by_side.sh)
+  FILE.npz      PoNQ files meshed too (grid scale from a _32 / _64 / _128 suffix, else 32)
+  -h, --help    this text";
+
 fn main() {
     // `--grid G` (repeatable) keeps only those synthetic grids, `--repeat N` times each: a
     // run for a profiler that is mostly meshing.
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
+    if args.iter().any(|a| a == "-h" || a == "--help") {
+        println!("{USAGE}");
+        return;
+    }
+    if let Some(bad) = args
+        .iter()
+        .find(|a| a.starts_with('-') && !["--grid", "--repeat", "--save"].contains(&a.as_str()))
+    {
+        eprintln!("error: unknown option {bad}\n\n{USAGE}");
+        std::process::exit(2);
+    }
     let value_of = |flag: &str| {
         args.windows(2)
             .filter(|w| w[0] == flag)

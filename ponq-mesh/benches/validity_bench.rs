@@ -64,8 +64,32 @@ fn row(name: &str, mesh: &TriMesh, repeat: usize) {
     );
 }
 
+const USAGE: &str = "\
+Validity-check benchmark: each part of the check on the meshes of mesh_bench's synthetic
+PoNQs at grids 145 and 230, and the two face hierarchies (SAH, Morton) side by side.
+
+usage: cargo bench -p ponq-mesh --bench validity_bench -- [--repeat N] [MESH ...]
+
+  --repeat N   best of N runs of each column (default 5)
+  MESH         .obj / .ply / .off / .stl files checked too
+  -h, --help   this text";
+
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
+    if args.iter().any(|a| a == "-h" || a == "--help") {
+        println!("{USAGE}");
+        return;
+    }
+    if let Some(bad) = args
+        .iter()
+        .find(|a| a.starts_with('-') && a.as_str() != "--repeat")
+    {
+        eprintln!("error: unknown option {bad}\n\n{USAGE}");
+        std::process::exit(2);
+    }
     let repeat = args
         .windows(2)
         .find(|w| w[0] == "--repeat")

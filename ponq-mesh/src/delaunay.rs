@@ -7,6 +7,9 @@
 //! with a stochastic visibility walk, on top of [`crate::predicates`]: exact orientation and
 //! insphere tests with Devillers-Teillaud symbolic perturbation, so co-spherical and coplanar
 //! inputs (lattices) give a valid triangulation with no flat tetrahedron and no jitter.
+//! The insertion starts from a super-tetrahedron far around the points; the result is checked
+//! to fill the convex hull and built again with a larger one when it does not
+//! ([`DelaunayStats::rebuilds`]; why and how: `SUPER_SCALES` in the source).
 //!
 //! Parallel insertion: after the first BRIO rounds, each worker thread takes one stretch of
 //! every later round's Hilbert order (so the workers are far apart in space), cut into chunks;

@@ -33,6 +33,7 @@ pub mod lite;
 pub mod manifold;
 pub mod marching_cubes;
 pub mod maxflow;
+pub mod memory;
 pub mod mesher;
 pub mod metrics;
 pub mod nn;

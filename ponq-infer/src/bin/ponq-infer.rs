@@ -285,6 +285,7 @@ fn run(args: &Args) -> Result<Outcome> {
 }
 
 fn main() -> ExitCode {
+    ponq_mesh::memory::keep_freed_memory();
     let args = Args::parse();
     match run(&args) {
         Ok(Outcome::Valid) => ExitCode::SUCCESS,

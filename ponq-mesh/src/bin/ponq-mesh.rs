@@ -239,6 +239,7 @@ fn run(args: &Args) -> Result<bool> {
 }
 
 fn main() -> ExitCode {
+    ponq_mesh::memory::keep_freed_memory();
     let args = Args::parse();
     match run(&args) {
         Ok(true) => ExitCode::SUCCESS,

@@ -444,6 +444,57 @@ fn brio_order(hilbert: &[(u64, u32)]) -> (Vec<u32>, Vec<usize>) {
     (order, rounds)
 }
 
+/// Moves the vertices extreme along the eight diagonal directions `(±1, ±1, ±1)` (hull
+/// vertices: the corners of an enclosing box, when there is one) to the front of the insertion
+/// order `order`, shifting the round starts `rounds` (as [`brio_order`] returns them) to match.
+/// Inserted late, such a vertex conflicts with the long tets along the hull: each of the
+/// mesher's eight protective corners replaced 2k-11k tets at once (40k in all at 109k
+/// points), in large cavities that hold many tets' locks and need the hashed linking. The
+/// triangulation does not depend on the order (ties are broken by input numbers).
+fn extremes_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usize]) {
+    use rayon::prelude::*;
+    // The largest `±x ± y ± z` per direction, the smallest index among equal values.
+    let better = |a: (f64, u32), b: (f64, u32)| {
+        if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+            b
+        } else {
+            a
+        }
+    };
+    let none = [(f64::NEG_INFINITY, u32::MAX); 8];
+    let best = vertices
+        .par_iter()
+        .enumerate()
+        .fold(
+            || none,
+            |mut acc, (i, p)| {
+                for (d, b) in acc.iter_mut().enumerate() {
+                    let s = |k: usize| if (d >> k) & 1 == 1 { p[k] } else { -p[k] };
+                    *b = better(*b, (s(0) + s(1) + s(2), i as u32));
+                }
+                acc
+            },
+        )
+        .reduce(|| none, |a, b| std::array::from_fn(|d| better(a[d], b[d])));
+    let mut extreme: Vec<u32> = best
+        .iter()
+        .map(|b| b.1)
+        .filter(|&v| v != u32::MAX)
+        .collect();
+    extreme.sort_unstable();
+    extreme.dedup();
+    let is_extreme = |v: u32| extreme.binary_search(&v).is_ok();
+    let moved: Vec<usize> = (0..order.len()).filter(|&j| is_extreme(order[j])).collect();
+    // A round that started at `r > 0` now starts after all moved vertices and the others
+    // before `r`.
+    for r in rounds.iter_mut().filter(|r| **r > 0) {
+        *r += moved.iter().filter(|&&j| j >= *r).count();
+    }
+    let front: Vec<u32> = moved.iter().map(|&j| order[j]).collect();
+    order.retain(|&v| !is_extreme(v));
+    order.splice(0..0, front);
+}
+
 impl Delaunay {
     /// Triangulates `points`. Exact duplicates are merged (see [`Delaunay::vertex_of_point`]).
     /// Fewer than four affinely independent points give a triangulation without tets.
@@ -504,7 +555,8 @@ impl Delaunay {
         } = distinct_points(&points, exact.scale(opts.merge_within.max(0.0)));
         // Number the vertices in insertion order inside the builder, so that consecutive
         // insertions touch neighbouring memory; `finish` maps the numbers back.
-        let (order, rounds) = brio_order(&hilbert);
+        let (mut order, mut rounds) = brio_order(&hilbert);
+        extremes_first(&vertices, &mut order, &mut rounds);
         let capacity = 8 * vertices.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
         let mut built = None;
         for (attempt, &scale) in SUPER_SCALES.iter().enumerate() {
@@ -1981,6 +2033,43 @@ mod tests {
             assert_eq!(order, reference, "{n} points, {nv} distinct");
             assert_eq!(rounds.first(), Some(&0));
             assert_eq!(rounds.last(), Some(&nv));
+        }
+    }
+
+    /// `extremes_first` puts the box corners first (in their order) and leaves every other
+    /// vertex in its round, in its order.
+    #[test]
+    fn extremes_go_first_and_the_rest_keep_their_rounds() {
+        let mut rng = SplitMix(5);
+        for n in [0usize, 3, 100, 5000] {
+            let mut points: Vec<[f64; 3]> = (0..n)
+                .map(|_| std::array::from_fn(|_| (rng.next() % 1_000_000) as f64 * 1e-6))
+                .collect();
+            let corners: Vec<[f64; 3]> = (0..8)
+                .map(|c| std::array::from_fn(|k| if (c >> k) & 1 == 1 { 2.0 } else { -1.0 }))
+                .collect();
+            points.extend(&corners);
+            let d = distinct_points(&points, 0.0);
+            let (before, rounds_before) = brio_order(&d.hilbert);
+            let (mut order, mut rounds) = (before.clone(), rounds_before.clone());
+            extremes_first(&d.vertices, &mut order, &mut rounds);
+            let is_corner = |v: u32| corners.contains(&d.vertices[v as usize]);
+            let expected_front: Vec<u32> =
+                before.iter().copied().filter(|&v| is_corner(v)).collect();
+            assert_eq!(order[..8], expected_front[..], "{n} points");
+            let round_of = |r: &[usize], j: usize| r.partition_point(|&x| x <= j) - 1;
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (0..d.vertices.len() as u32).collect::<Vec<_>>());
+            let rest = |o: &[u32], r: &[usize]| -> Vec<(usize, u32)> {
+                (0..o.len())
+                    .filter(|&j| !is_corner(o[j]))
+                    .map(|j| (round_of(r, j), o[j]))
+                    .collect()
+            };
+            assert_eq!(rest(&order, &rounds), rest(&before, &rounds_before));
+            assert_eq!(round_of(&rounds, 7), 0);
+            assert_eq!((rounds[0], rounds.last()), (0, Some(&d.vertices.len())));
         }
     }
 

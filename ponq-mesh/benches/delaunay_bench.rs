@@ -13,6 +13,9 @@
 //! little-endian `f64` x, y, z triples (what `--write` writes and
 //! `benches/cgal/delaunay_cgal.cpp` reads).
 
+#[path = "util/args.rs"]
+mod args;
+
 use ponq_mesh::delaunay::Delaunay;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -93,31 +96,21 @@ Columns: tets, time and microseconds per point on one and on all threads, vertic
 to the final one-thread pass, rebuilds with a larger super-tetrahedron.";
 
 fn main() {
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| a != "--bench")
-        .collect();
+    let args = args::parse(USAGE, &["--write"]);
     let mut write_dir: Option<PathBuf> = None;
     let mut files = Vec::new();
     let mut it = args.iter();
     while let Some(a) = it.next() {
-        match a.as_str() {
-            "-h" | "--help" => {
-                println!("{USAGE}");
-                return;
-            }
-            "--write" => match it.next() {
+        if a == "--write" {
+            match it.next() {
                 Some(dir) => write_dir = Some(PathBuf::from(dir)),
                 None => {
                     eprintln!("error: --write needs a folder\n\n{USAGE}");
                     std::process::exit(2);
                 }
-            },
-            flag if flag.starts_with('-') => {
-                eprintln!("error: unknown option {flag}\n\n{USAGE}");
-                std::process::exit(2);
             }
-            _ => files.push(PathBuf::from(a)),
+        } else {
+            files.push(PathBuf::from(a));
         }
     }
     let sets: Vec<(String, Vec<[f64; 3]>)> = if files.is_empty() {

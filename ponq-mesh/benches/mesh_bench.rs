@@ -3,6 +3,8 @@
 //! `cargo bench -p ponq-mesh --bench mesh_bench` prints a table. Extra `.npz` PoNQ files given
 //! as arguments after `--` are meshed too (grid scale from a `_32`/`_64`/`_128` suffix, else 32).
 
+#[path = "util/args.rs"]
+mod args;
 #[path = "../tests/common/mod.rs"]
 mod common;
 
@@ -69,21 +71,7 @@ usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N]
 fn main() {
     // `--grid G` (repeatable) keeps only those synthetic grids, `--repeat N` times each: a
     // run for a profiler that is mostly meshing.
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| a != "--bench")
-        .collect();
-    if args.iter().any(|a| a == "-h" || a == "--help") {
-        println!("{USAGE}");
-        return;
-    }
-    if let Some(bad) = args
-        .iter()
-        .find(|a| a.starts_with('-') && !["--grid", "--repeat", "--save"].contains(&a.as_str()))
-    {
-        eprintln!("error: unknown option {bad}\n\n{USAGE}");
-        std::process::exit(2);
-    }
+    let args = args::parse(USAGE, &["--grid", "--repeat", "--save"]);
     let value_of = |flag: &str| {
         args.windows(2)
             .filter(|w| w[0] == flag)

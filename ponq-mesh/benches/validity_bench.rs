@@ -7,6 +7,8 @@
 //! (`.obj`, `.ply`, `.off`, `.stl`) given after `--` are checked too. `--repeat N` (default 5)
 //! keeps the best of N runs of each column.
 
+#[path = "util/args.rs"]
+mod args;
 #[path = "../tests/common/mod.rs"]
 mod common;
 
@@ -75,21 +77,7 @@ usage: cargo bench -p ponq-mesh --bench validity_bench -- [--repeat N] [MESH ...
   -h, --help   this text";
 
 fn main() {
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| a != "--bench")
-        .collect();
-    if args.iter().any(|a| a == "-h" || a == "--help") {
-        println!("{USAGE}");
-        return;
-    }
-    if let Some(bad) = args
-        .iter()
-        .find(|a| a.starts_with('-') && a.as_str() != "--repeat")
-    {
-        eprintln!("error: unknown option {bad}\n\n{USAGE}");
-        std::process::exit(2);
-    }
+    let args = args::parse(USAGE, &["--repeat"]);
     let repeat = args
         .windows(2)
         .find(|w| w[0] == "--repeat")

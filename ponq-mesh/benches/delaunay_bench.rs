@@ -16,7 +16,7 @@
 #[path = "util/args.rs"]
 mod args;
 
-use ponq_mesh::delaunay::Delaunay;
+use ponq_mesh::delaunay::{Delaunay, DelaunayStats};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -92,8 +92,9 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [FILE ..
   --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
   -h, --help   this text
 
-Columns: tets, time and microseconds per point on one and on all threads, vertices deferred
-to the final one-thread pass, rebuilds with a larger super-tetrahedron.";
+Columns: tets, time and microseconds per point on one and on all threads, insertions that
+backed off and vertices left to the final one-thread pass (\"stopped\": the workers stopped
+early, too many backed off), rebuilds with a larger super-tetrahedron.";
 
 fn main() {
     let args = args::parse(USAGE, &["--write"]);
@@ -138,34 +139,40 @@ fn main() {
     }
     let threads = rayon::current_num_threads();
     println!(
-        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | deferred | rebuilds |"
+        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | backed off / deferred | rebuilds |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
         let time = |workers: usize| {
             let mut best = f64::MAX;
             let mut tets = 0;
-            let mut deferred = 0;
-            let mut rebuilds = 0;
+            let mut stats = Default::default();
             for _ in 0..5 {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers).expect("finite points");
                 best = best.min(t.elapsed().as_secs_f64());
                 tets = dt.tets.len();
-                deferred = dt.stats.deferred;
-                rebuilds = dt.stats.rebuilds;
+                stats = dt.stats;
             }
-            (best, tets, deferred, rebuilds)
+            (best, tets, stats)
         };
-        let (one, tets, _, _) = time(1);
-        let (all, _, deferred, rebuilds) = time(threads);
+        let (one, tets, _) = time(1);
+        let (all, _, stats): (f64, usize, DelaunayStats) = time(threads);
+        let stopped = if stats.parallel_stopped {
+            " (stopped)"
+        } else {
+            ""
+        };
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {deferred} | {rebuilds} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {} / {}{stopped} | {} |",
             pts.len(),
             one * 1e3,
             one * 1e6 / pts.len() as f64,
             all * 1e3,
             all * 1e6 / pts.len() as f64,
+            stats.backed_off,
+            stats.deferred,
+            stats.rebuilds,
         );
     }
 }

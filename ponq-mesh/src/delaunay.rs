@@ -86,9 +86,17 @@ pub struct DelaunayStats {
     pub workers: usize,
     /// Vertices inserted by the parallel phase.
     pub parallel_insertions: usize,
-    /// Vertices a worker backed off from (a tet it needed was held by another worker) and
-    /// that were inserted afterwards by one thread.
+    /// Vertices inserted after the parallel phase by one thread: those a worker backed off
+    /// from twice (a tet it needed was held by another worker), and those the workers left
+    /// when they stopped early ([`DelaunayStats::parallel_stopped`]).
     pub deferred: usize,
+    /// First attempts of the parallel phase that backed off (each vertex is tried again after
+    /// the rest of its chunk).
+    pub backed_off: usize,
+    /// The workers stopped before the end of the parallel phase because more than one first
+    /// attempt in 8 backed off (cavities so large that the workers' keep overlapping, e.g. on
+    /// points of a nearly flat convex surface); the rest went to the one-thread pass.
+    pub parallel_stopped: bool,
     /// Chunks of the parallel phase inserted by a worker other than their owner (one that
     /// had finished its own share).
     pub stolen_chunks: usize,
@@ -739,6 +747,15 @@ const POOL_BLOCK: usize = 2048;
 /// Vertices a worker claims at a time in the parallel phase (see [`Builder::run`]).
 const CHUNK: usize = 256;
 
+/// The workers stop claiming chunks once at least [`STOP_MIN_ATTEMPTS`] insertions have been
+/// tried and more than one in `STOP_BACKOFF_RATIO` backed off: two workers whose cavities keep
+/// overlapping are slower than one (20k points on a flat paraboloid cap: 2.5x slower, with
+/// 7,283 vertices backed off twice), and the rest is then inserted by one thread. On the
+/// mesher's inputs about one insertion in 1,000 backs off.
+const STOP_BACKOFF_RATIO: usize = 8;
+/// See [`STOP_BACKOFF_RATIO`].
+const STOP_MIN_ATTEMPTS: usize = 1024;
+
 impl Shared<'_> {
     #[inline]
     fn p(&self, v: u32) -> &[f64; 3] {
@@ -800,6 +817,8 @@ struct Worker {
     deferred: Vec<u32>,
     /// Chunks this worker took from other workers' queues.
     stolen: usize,
+    /// First attempts of this worker that backed off.
+    backed_off: usize,
     /// Insertions linked by [`Worker::link_hashed`].
     large_cavities: usize,
     /// Testing aid: every `n`-th lock attempt fails (0: never).
@@ -840,6 +859,7 @@ impl Worker {
             last: 0,
             deferred: Vec::new(),
             stolen: 0,
+            backed_off: 0,
             large_cavities: 0,
             fail_every: 0,
             lock_attempts: 0,
@@ -1586,7 +1606,7 @@ impl Builder {
         // a mark array beside them): no faster either (the cavity search reads both).
         // Zeroed pages: the locks of slots never used cost nothing.
         let locks: Vec<AtomicU32> = bytemuck::allocation::zeroed_vec(self.used);
-        {
+        let (left, parallel_stopped) = {
             use rayon::prelude::*;
             let mut sh = self.shared();
             sh.pool = Some(&pool);
@@ -1598,6 +1618,12 @@ impl Builder {
                 .iter()
                 .map(|q| q.iter().map(|_| AtomicBool::new(false)).collect())
                 .collect();
+            // First attempts and back-offs so far, all workers; `stop` once too many back off.
+            let (attempts, backoffs, stop) = (
+                AtomicUsize::new(0),
+                AtomicUsize::new(0),
+                AtomicBool::new(false),
+            );
             workers.par_iter_mut().enumerate().for_each(|(i, w)| {
                 // A vertex backed off from is tried again after the rest of its chunk (the
                 // other worker has usually moved on by then), and only then deferred.
@@ -1613,6 +1639,12 @@ impl Builder {
                     } else {
                         (c..d).for_each(&mut one);
                     }
+                    w.backed_off += retry.len();
+                    let tried = attempts.fetch_add((d - c) as usize, Relaxed) + (d - c) as usize;
+                    let failed = backoffs.fetch_add(retry.len(), Relaxed) + retry.len();
+                    if tried >= STOP_MIN_ATTEMPTS && failed * STOP_BACKOFF_RATIO > tried {
+                        stop.store(true, Relaxed);
+                    }
                     for v in retry {
                         if w.insert::<true>(&sh, v).is_err() {
                             w.deferred.push(v);
@@ -1620,6 +1652,9 @@ impl Builder {
                     }
                 };
                 for (j, &chunk) in queues[i].iter().enumerate() {
+                    if stop.load(Relaxed) {
+                        return;
+                    }
                     if !claimed[i][j].swap(true, Relaxed) {
                         insert_chunk(w, chunk);
                     }
@@ -1628,7 +1663,7 @@ impl Builder {
                     // Owners claim from the front and thieves from the back, so the first
                     // claimed chunk from the back ends the search.
                     for (j, &chunk) in queues[other].iter().enumerate().rev() {
-                        if claimed[other][j].swap(true, Relaxed) {
+                        if stop.load(Relaxed) || claimed[other][j].swap(true, Relaxed) {
                             break;
                         }
                         w.stolen += 1;
@@ -1636,10 +1671,21 @@ impl Builder {
                     }
                 }
             });
-        }
+            // The chunks no worker claimed (the workers stopped) go to the one-thread pass.
+            let mut left: Vec<u32> = Vec::new();
+            for (queue, claimed) in queues.iter().zip(&claimed) {
+                for (&(c, d, _), taken) in queue.iter().zip(claimed) {
+                    if !taken.load(Relaxed) {
+                        left.extend(c..d);
+                    }
+                }
+            }
+            (left, stop.load(Relaxed))
+        };
         self.used = pool.load(Relaxed).min(self.used);
         // Gather the slots and the deferred vertices; finish with one thread.
-        let mut deferred = Vec::new();
+        let parallel_insertions = parallel_insertions - left.len();
+        let mut deferred = left;
         for w in &mut workers {
             main.free.append(&mut w.free);
             main.free.extend(w.fresh.0..w.fresh.1);
@@ -1659,6 +1705,8 @@ impl Builder {
             parallel_insertions,
             deferred: deferred.len(),
             stolen_chunks: workers.iter().map(|w| w.stolen).sum(),
+            backed_off: workers.iter().map(|w| w.backed_off).sum(),
+            parallel_stopped,
             ..Default::default()
         };
         self.insert_sequential(&mut main, deferred);

@@ -46,14 +46,18 @@ use crate::predicates::{
 /// missing, and 27 of 672k for random points in a cube). So the result is checked
 /// ([`Builder::fills_hull`]: its boundary must be closed, convex and through every vertex that
 /// touches the super-tetrahedron's tets) and built again with the next size when it is not.
-/// 2^30 suffices for everything measured (CGAL's tet counts on random, slab, paraboloid,
-/// sphere and PoNQ point sets); the larger sizes keep the predicates' products in the range
-/// of `f64` (the largest, 2^150 extents of at most 2^11, gives products below 2^810), where
-/// the exact stages decide what the filters cannot.
-const SUPER_SCALES: [f64; 3] = [
+/// 2^30 suffices for random, slab, paraboloid and sphere point sets (CGAL's tet counts); a
+/// CAD PoNQ's v* alone, whose hull faces are a rounding from flat, need 2^90 (the mesher's
+/// never do: it adds an enclosing box, whose corners form the hull). The largest size, 2^190
+/// extents of at most 2^11, keeps every product of the predicates below 2^1005, inside the
+/// range of `f64`, where the exact stages decide what the filters cannot. Flatter still (a
+/// tet whose circumsphere reaches past that, e.g. a point 1e-40 off a triangle that is itself
+/// nearly a segment) is an error, not a triangulation with a tet missing.
+const SUPER_SCALES: [f64; 4] = [
     (1u64 << 30) as f64,
     (1u128 << 90) as f64,
-    (1u128 << 90) as f64 * (1u64 << 60) as f64,
+    (1u128 << 75) as f64 * (1u128 << 75) as f64,
+    (1u128 << 95) as f64 * (1u128 << 95) as f64,
 ];
 
 /// Marker for "no neighbour" (a face on the boundary of the triangulated region).
@@ -580,7 +584,7 @@ impl Delaunay {
         let Some(mut dt) = built else {
             return Err(Error::InvalidInput(format!(
                 "the {} points are too close to a plane for an exact tetrahedralisation: a \
-                 super-tetrahedron 2^150 times their extent still cuts off tets along the \
+                 super-tetrahedron 2^190 times their extent still cuts off tets along the \
                  convex hull",
                 vertices.len()
             )));

@@ -648,3 +648,52 @@ fn flat_point_sets_are_triangulated_again_with_a_larger_super_tetrahedron() {
         check_fills_hull(&dt);
     }
 }
+
+mod hull_fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn coord() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            // Lattice values: coplanar and co-spherical ties, hull faces with many points.
+            (-4i32..=4).prop_map(|i| i as f64 * 0.25),
+            -1.0f64..1.0,
+            // Nearly flat: a rounding, or far more, off the lattice planes.
+            prop::sample::select(vec![1e-16, -3e-13, 1e-30, -1e-40, 2e-300]),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+        /// Any point set, with no enclosing box: the tets are positively oriented, have empty
+        /// circumspheres and fill the convex hull (brute force), whatever the flatness.
+        #[test]
+        fn tets_fill_the_hull_of_any_point_set(
+            pts in prop::collection::vec(prop::array::uniform3(coord()), 0..40)
+        ) {
+            let dt = match Delaunay::new(&pts) {
+                Ok(dt) => dt,
+                // Past the largest super-tetrahedron: an error, never a missing tet.
+                Err(e) if e.to_string().contains("too close to a plane") => return Ok(()),
+                Err(e) => return Err(TestCaseError::fail(e.to_string())),
+            };
+            if dt.tets.is_empty() {
+                // Then no four vertices span a volume.
+                let v = &dt.vertices;
+                for (a, b, c, d) in (0..v.len()).flat_map(|a| {
+                    (a + 1..v.len()).flat_map(move |b| {
+                        (b + 1..v.len())
+                            .flat_map(move |c| (c + 1..v.len()).map(move |d| (a, b, c, d)))
+                    })
+                }) {
+                    prop_assert_eq!(orient3d(&v[a], &v[b], &v[c], &v[d]), 0);
+                }
+            } else {
+                check_structure(&dt);
+                check_fills_hull(&dt);
+                check_empty_spheres(&dt);
+            }
+        }
+    }
+}

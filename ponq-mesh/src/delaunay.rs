@@ -1747,7 +1747,10 @@ impl Builder {
                 }
             })
             .collect();
-        let filled = self.fills_hull(&key);
+        if !self.fills_hull(&key) {
+            // Built again with a larger super-tetrahedron: no output needed.
+            return (Delaunay::default(), false);
+        }
         // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
@@ -1845,7 +1848,7 @@ impl Builder {
             neighbors,
             stats,
         };
-        (dt, filled)
+        (dt, true)
     }
 
     /// Whether the tets of real vertices fill the convex hull of the real vertices (see

@@ -98,7 +98,7 @@ pub struct DelaunayStats {
     /// the rest of its chunk).
     pub backed_off: usize,
     /// The workers stopped before the end of the parallel phase because more than one first
-    /// attempt in 8 backed off (cavities so large that the workers' keep overlapping, e.g. on
+    /// attempt in 8 backed off (cavities so large that the workers' cavities keep overlapping, e.g. on
     /// points of a nearly flat convex surface); the rest went to the one-thread pass.
     pub parallel_stopped: bool,
     /// Chunks of the parallel phase inserted by a worker other than their owner (one that

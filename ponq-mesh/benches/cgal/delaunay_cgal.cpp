@@ -8,8 +8,9 @@
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <vector>
+
+#include "read_points.h"
 
 typedef CGAL::Exact_predicates_inexact_constructions_kernel K;
 typedef CGAL::Delaunay_triangulation_3<K> DT;
@@ -17,15 +18,8 @@ typedef CGAL::Delaunay_triangulation_3<K> DT;
 int main(int argc, char** argv) {
   int reps = 5;
   for (int a = 1; a < argc; ++a) {
-    std::ifstream in(argv[a], std::ios::binary | std::ios::ate);
-    if (!in) {
-      std::fprintf(stderr, "cannot read %s\n", argv[a]);
-      return 1;
-    }
-    size_t bytes = in.tellg();
-    std::vector<double> xyz(bytes / sizeof(double));
-    in.seekg(0);
-    in.read(reinterpret_cast<char*>(xyz.data()), bytes);
+    std::vector<double> xyz;
+    if (!read_points(argv[a], xyz)) return 1;
     std::vector<K::Point_3> pts;
     for (size_t i = 0; i + 2 < xyz.size(); i += 3) pts.emplace_back(xyz[i], xyz[i + 1], xyz[i + 2]);
     double best = 1e30;

@@ -8,7 +8,9 @@
 //! ponq-mesh/benches/cgal/side_by_side.sh                              # the same points in CGAL
 //! ```
 //!
-//! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5.
+//! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5. Each
+//! is timed as a whole and by its insertion stage alone (`DelaunayStats::times`: without the
+//! Hilbert ordering and the canonical output).
 //! A `.npz` file is a PoNQ (its v* are triangulated); any other point file is raw
 //! little-endian `f64` x, y, z triples (what `--write` writes and
 //! `benches/cgal/delaunay_cgal.cpp` reads).
@@ -92,8 +94,10 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [FILE ..
   --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
   -h, --help   this text
 
-Columns: tets, time and microseconds per point on one and on all threads, insertions that
-backed off and vertices left to the final one-thread pass (\"stopped\": the workers stopped
+Columns: tets, time and microseconds per point on one and on all threads (the whole call, and
+its insertion stage alone: without the ordering before it and the canonical output after it,
+see DelaunayStats::times; best of 5 each), the ordering and output stages on all threads
+(best of 5 each), insertions that backed off and vertices left to the final one-thread pass (\"stopped\": the workers stopped
 early, too many backed off), rebuilds with a larger super-tetrahedron.";
 
 fn main() {
@@ -139,37 +143,54 @@ fn main() {
     }
     let threads = rayon::current_num_threads();
     println!(
-        "| input | points | tets | 1 thread (ms) | us / point | {threads} threads (ms) | us / point | backed off / deferred | rebuilds |"
+        "| input | points | tets | 1 thread (ms) | us / point | insertion only | {threads} threads (ms) | us / point | insertion only | ordering / output (ms) | backed off / deferred | rebuilds |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
+        // The best whole call and, apart, the best of each stage of 5.
         let time = |workers: usize| {
-            let mut best = f64::MAX;
+            let (mut best, mut best_insertion) = (f64::MAX, f64::MAX);
+            let (mut best_ordering, mut best_output) = (f64::MAX, f64::MAX);
             let mut tets = 0;
             let mut stats = Default::default();
             for _ in 0..5 {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers).expect("finite points");
                 best = best.min(t.elapsed().as_secs_f64());
+                best_insertion = best_insertion.min(dt.stats.times.insertion.as_secs_f64());
+                best_ordering = best_ordering.min(dt.stats.times.ordering.as_secs_f64());
+                best_output = best_output.min(dt.stats.times.output.as_secs_f64());
                 tets = dt.tets.len();
                 stats = dt.stats;
             }
-            (best, tets, stats)
+            (
+                best,
+                best_insertion,
+                (best_ordering, best_output),
+                tets,
+                stats,
+            )
         };
-        let (one, tets, _) = time(1);
-        let (all, _, stats): (f64, usize, DelaunayStats) = time(threads);
+        let (one, one_insertion, _, tets, _) = time(1);
+        let (all, all_insertion, (ordering, output), _, stats): (_, _, _, _, DelaunayStats) =
+            time(threads);
+        let per_point = |s: f64| s * 1e6 / pts.len() as f64;
         let stopped = if stats.parallel_stopped {
             " (stopped)"
         } else {
             ""
         };
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.1} | {:.2} | {} / {}{stopped} | {} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.2} | {:.1} | {:.2} | {:.2} | {:.1} / {:.1} | {} / {}{stopped} | {} |",
             pts.len(),
             one * 1e3,
-            one * 1e6 / pts.len() as f64,
+            per_point(one),
+            per_point(one_insertion),
             all * 1e3,
-            all * 1e6 / pts.len() as f64,
+            per_point(all),
+            per_point(all_insertion),
+            ordering * 1e3,
+            output * 1e3,
             stats.backed_off,
             stats.deferred,
             stats.rebuilds,

@@ -649,6 +649,38 @@ fn flat_point_sets_are_triangulated_again_with_a_larger_super_tetrahedron() {
     }
 }
 
+/// The stage times of `DelaunayStats::times` are each measured and together no longer than
+/// the call (one and two threads; and with rebuilds, whose attempts all count).
+#[test]
+fn stage_times_add_up_to_at_most_the_call() {
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let cube: Vec<[f64; 3]> = (0..20_000)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+        .collect();
+    let slab: Vec<[f64; 3]> = cube.iter().map(|p| [p[0], p[1], p[2] * 1e-12]).collect();
+    for (pts, rebuilds) in [(&cube, 0), (&slab, 1)] {
+        for threads in [1, 2] {
+            let start = std::time::Instant::now();
+            let dt = Delaunay::with_threads(pts, threads).unwrap();
+            let call = start.elapsed();
+            let t = dt.stats.times;
+            assert_eq!(dt.stats.rebuilds, rebuilds);
+            assert!(
+                t.ordering > std::time::Duration::ZERO
+                    && t.insertion > std::time::Duration::ZERO
+                    && t.output > std::time::Duration::ZERO,
+                "{t:?}"
+            );
+            assert!(
+                t.ordering + t.insertion + t.output <= call,
+                "{t:?} in {call:?}"
+            );
+            // Inserting 20k points is most of the work.
+            assert!(t.insertion > t.ordering, "{t:?}");
+        }
+    }
+}
+
 mod hull_fuzz {
     use super::*;
     use proptest::prelude::*;

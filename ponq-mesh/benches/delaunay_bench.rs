@@ -97,8 +97,9 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [FILE ..
 Columns: tets, time and microseconds per point on one and on all threads (the whole call, and
 its insertion stage alone: without the ordering before it and the canonical output after it,
 see DelaunayStats::times; best of 5 each), the ordering and output stages on all threads
-(best of 5 each), insertions that backed off and vertices left to the final one-thread pass (\"stopped\": the workers stopped
-early, too many backed off), rebuilds with a larger super-tetrahedron.";
+(best of 5 each), insertions that backed off and vertices left to the final one-thread pass
+(\"stopped\": the workers stopped early, too many backed off), rebuilds with a larger
+super-tetrahedron.";
 
 fn main() {
     let args = args::parse(USAGE, &["--write"]);
@@ -147,33 +148,27 @@ fn main() {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
-        // The best whole call and, apart, the best of each stage of 5.
+        // The best whole call and, apart, the best of each stage, of 5 (seconds: whole call,
+        // ordering, insertion, output).
         let time = |workers: usize| {
-            let (mut best, mut best_insertion) = (f64::MAX, f64::MAX);
-            let (mut best_ordering, mut best_output) = (f64::MAX, f64::MAX);
+            let mut best = [f64::MAX; 4];
             let mut tets = 0;
-            let mut stats = Default::default();
+            let mut stats = DelaunayStats::default();
             for _ in 0..5 {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers).expect("finite points");
-                best = best.min(t.elapsed().as_secs_f64());
-                best_insertion = best_insertion.min(dt.stats.times.insertion.as_secs_f64());
-                best_ordering = best_ordering.min(dt.stats.times.ordering.as_secs_f64());
-                best_output = best_output.min(dt.stats.times.output.as_secs_f64());
+                let s = dt.stats.times;
+                let run = [t.elapsed(), s.ordering, s.insertion, s.output];
+                for (b, r) in best.iter_mut().zip(run) {
+                    *b = b.min(r.as_secs_f64());
+                }
                 tets = dt.tets.len();
                 stats = dt.stats;
             }
-            (
-                best,
-                best_insertion,
-                (best_ordering, best_output),
-                tets,
-                stats,
-            )
+            (best, tets, stats)
         };
-        let (one, one_insertion, _, tets, _) = time(1);
-        let (all, all_insertion, (ordering, output), _, stats): (_, _, _, _, DelaunayStats) =
-            time(threads);
+        let ([one, _, one_insertion, _], tets, _) = time(1);
+        let ([all, ordering, all_insertion, output], _, stats) = time(threads);
         let per_point = |s: f64| s * 1e6 / pts.len() as f64;
         let stopped = if stats.parallel_stopped {
             " (stopped)"

@@ -1348,7 +1348,7 @@ const GATHER_AHEAD: usize = 16;
 /// result.
 #[inline(always)]
 fn prefetch<T>(x: &T) {
-    const { assert!(size_of::<T>() <= 64) };
+    const { assert!(size_of::<T>() >= 1 && size_of::<T>() <= 64) };
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};

@@ -35,6 +35,7 @@ use crate::halfedge::HalfEdges;
 use crate::quadric::Quadric;
 use crate::score::NORMAL_SCALE;
 use crate::validity::intersecting_face_pairs_among;
+use crate::vec3::{cross, dot, sub};
 
 /// What [`align_creases`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -76,22 +77,6 @@ const MAX_NEW_ANGLE_COS: f64 = -0.866_025_403_784_438_6;
 const MAX_PASSES: usize = 8;
 /// Attempts before giving up on flips.
 const MAX_ATTEMPTS: usize = 4;
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
 
 /// The per-vertex data the flips read: mesh vertex `w` has the quadric `quadrics[i]` and the
 /// unit normal `normals[i]` with `i = index[w]`, or `i = w` without an index. The index spares

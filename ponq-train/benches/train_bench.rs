@@ -8,9 +8,15 @@
 //! both alike).
 //! `ponq-train/benches/side_by_side.sh` also runs the same network in PyTorch.
 //!
-//! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1; the CPU recipes'
-//! networks (`configs/cpu.toml`, width 32, `configs/cpu-w48.toml`, width 48, and the shipped
+//! Cases: the paper's network (width 128, P = 4) on a 33^3 grid, batch 1 (`paper16`: batch
+//! 16, the paper's phase-1 step, `configs/phase1.toml`); the CPU recipes' networks
+//! (`configs/cpu.toml`, width 32, `configs/cpu-w48.toml`, width 48, and the shipped
 //! `configs/cpu-w64.toml`, width 64) on 17^3-node crops, batch 1 and 8 (widths 48 / 64: 8).
+//!
+//! `--backend wgpu` (or `cuda`; built with `--features ponq-train/wgpu` / `cuda`) runs the
+//! same cases on the GPU with Burn's stock layers (the only ones there), waiting for the device
+//! after every timed call; `paper16` is then among the default cases. The peak-memory column
+//! counts host memory only.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -18,6 +24,7 @@ use std::time::Instant;
 
 use burn::optim::GradientsParams;
 use burn::prelude::*;
+use ponq_model::backend::{self, BackendKind};
 use ponq_model::{Kernels, PonqNet};
 use ponq_train::config::{LossWeights, ModelSection, TrainConfig};
 use ponq_train::data::{Batcher, Item, ItemOptions, item_frame, make_item, sphere_shape};
@@ -150,12 +157,23 @@ struct Row {
     step_mem: usize,
 }
 
-fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: usize, reps: usize) {
+/// One case: `batch` items of `crop` cells (0: the whole 33^3 grid) on `dev`, `reps` timed
+/// repetitions after one warm-up; on the CPU every kernel implementation, elsewhere the stock
+/// layers.
+fn bench(
+    dev: &Device,
+    name: &str,
+    model: ModelSection,
+    batch: usize,
+    crop: usize,
+    samples: usize,
+    reps: usize,
+) {
     let cfg = TrainConfig {
         model: model.clone(),
         ..Default::default()
     };
-    let dev = ponq_model::backend::cpu();
+    let on_cpu = *dev == ponq_model::backend::cpu();
     let its = items(batch, crop, samples);
     let frame = item_frame(32);
     let cells = batch
@@ -165,17 +183,20 @@ fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: us
             crop * crop * crop
         };
     let flops = forward_flops(&model, cells);
-    let net: PonqNet = cfg.model.net().init(&dev);
+    let net: PonqNet = cfg.model.net().init(dev);
     let x = Batcher {
         device: dev.clone(),
     }
     .batch(&its)
     .expect("batch");
-    let ad = dev.autodiff();
+    let ad = dev.clone().autodiff();
     let xa = Batcher { device: ad.clone() }.batch(&its).expect("batch");
-    let mut kinds = vec![Kernels::Stock, Kernels::Fast];
-    if ponq_model::fast::bf16::available() {
-        kinds.push(Kernels::FastBf16);
+    let mut kinds = vec![Kernels::Stock];
+    if on_cpu {
+        kinds.push(Kernels::Fast);
+        if ponq_model::fast::bf16::available() {
+            kinds.push(Kernels::FastBf16);
+        }
     }
     let mut rows: Vec<Row> = kinds
         .iter()
@@ -210,6 +231,7 @@ fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: us
                 let mut g = GradientsParams::from_grads(l.total.backward(), &model);
                 train::clip_global_norm(&model, &mut g, 1.0);
                 models[i] = optims[i].step(1e-4, model.clone(), g);
+                dev.sync().expect("device sync");
             });
             if rep > 0 {
                 rows[i].fwd.push(s);
@@ -241,37 +263,51 @@ fn bench(name: &str, model: ModelSection, batch: usize, crop: usize, samples: us
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    // `--backend B` (taken out of the arguments, so that `cpu`, a name of flex, is no case).
+    let kind: BackendKind = match args.iter().position(|a| a == "--backend") {
+        Some(i) if i + 1 < args.len() => {
+            let b: Vec<String> = args.drain(i..i + 2).collect();
+            b[1].parse().unwrap_or_else(|e: String| fail(&e))
+        }
+        Some(_) => fail("--backend needs a value: flex, wgpu or cuda"),
+        None => BackendKind::Flex,
+    };
+    let dev = backend::device(kind).unwrap_or_else(|e| fail(&e));
     let reps = args
         .iter()
         .find_map(|a| a.parse::<usize>().ok())
         .unwrap_or(3)
         .max(1);
-    // Case filter: `paper`, `cpu` or `w48` (default all).
+    // Case filter: `paper`, `paper16`, `cpu`, `w48` or `w64` (default all; `paper16` only on a
+    // GPU by default).
+    let cases = ["paper", "paper16", "cpu", "w48", "w64"];
     let want = |case: &str| {
-        !args
-            .iter()
-            .any(|a| ["paper", "cpu", "w48", "w64"].contains(&a.as_str()))
-            || args.iter().any(|a| a == case)
+        if args.iter().any(|a| cases.contains(&a.as_str())) {
+            args.iter().any(|a| a == case)
+        } else {
+            case != "paper16" || kind != BackendKind::Flex
+        }
     };
-    println!(
-        "GEMM ceiling (one 32768 x 3456 x 128 gemm call, {} threads): {:.0} GFLOP/s\n",
-        rayon::current_num_threads(),
-        gemm_ceiling()
-    );
+    if kind == BackendKind::Flex {
+        println!(
+            "GEMM ceiling (one 32768 x 3456 x 128 gemm call, {} threads): {:.0} GFLOP/s\n",
+            rayon::current_num_threads(),
+            gemm_ceiling()
+        );
+    } else {
+        println!("backend: {kind} (Burn's stock layers)\n");
+    }
     println!(
         "| network | parameters | input | batch | kernels | forward (s) | forward GFLOP/s | training step (s) | step GFLOP/s (3x forward FLOPs) | speed-up vs stock (forward / step) | peak MB (forward / step) |"
     );
     println!("|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|");
+    let paper = "paper (width 128, P 4)";
     if want("paper") {
-        bench(
-            "paper (width 128, P 4)",
-            ModelSection::default(),
-            1,
-            0,
-            100_000,
-            reps,
-        );
+        bench(&dev, paper, ModelSection::default(), 1, 0, 100_000, reps);
+    }
+    if want("paper16") {
+        bench(&dev, paper, ModelSection::default(), 16, 0, 100_000, reps);
     }
     let cpu = ModelSection {
         width: 32,
@@ -280,18 +316,25 @@ fn main() {
         decoder_blocks: 3,
     };
     if want("cpu") {
-        bench("cpu.toml (width 32)", cpu.clone(), 1, 16, 16_000, reps);
-        bench("cpu.toml (width 32)", cpu.clone(), 8, 16, 16_000, reps);
+        for batch in [1, 8] {
+            let name = "cpu.toml (width 32)";
+            bench(&dev, name, cpu.clone(), batch, 16, 16_000, reps);
+        }
     }
     if want("w48") {
         let w48 = ModelSection {
             width: 48,
             ..cpu.clone()
         };
-        bench("cpu-w48.toml (width 48)", w48, 8, 16, 16_000, reps);
+        bench(&dev, "cpu-w48.toml (width 48)", w48, 8, 16, 16_000, reps);
     }
     if want("w64") {
         let w64 = ModelSection { width: 64, ..cpu };
-        bench("cpu-w64.toml (width 64)", w64, 8, 16, 16_000, reps);
+        bench(&dev, "cpu-w64.toml (width 64)", w64, 8, 16, 16_000, reps);
     }
+}
+
+fn fail(msg: &str) -> ! {
+    eprintln!("train_bench: {msg}");
+    std::process::exit(2)
 }

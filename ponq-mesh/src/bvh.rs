@@ -383,13 +383,32 @@ impl Bvh {
 
     /// Calls `f(i)` for every item `i` whose box overlaps the closed box `b` (touching counts),
     /// each once, in no particular order.
-    pub fn query_overlaps(&self, b: &Aabb, mut f: impl FnMut(usize)) {
+    pub fn query_overlaps(&self, b: &Aabb, f: impl FnMut(usize)) {
+        // The nodes to visit: on the call stack up to 64 of them (the depth of any reasonable
+        // tree), on the heap beyond. A `Vec` per query cost a heap allocation per call: most
+        // of the time of the crease flips' intersection test, which queries the tree once per
+        // face of the mesh.
+        self.query_overlaps_inline::<64>(b, f);
+    }
+
+    /// [`Bvh::query_overlaps`] with room for `INLINE` nodes to visit on the call stack
+    /// (`INLINE >= 1`; the tests take a small one to reach the heap part).
+    fn query_overlaps_inline<const INLINE: usize>(&self, b: &Aabb, mut f: impl FnMut(usize)) {
         if self.nodes.is_empty() {
             return;
         }
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(n) = stack.pop() {
+        let mut inline = [0u32; INLINE];
+        let mut len = 1usize;
+        let mut spill: Vec<u32> = Vec::new();
+        loop {
+            let n = if let Some(n) = spill.pop() {
+                n
+            } else if len > 0 {
+                len -= 1;
+                inline[len]
+            } else {
+                break;
+            };
             let node = &self.nodes[n as usize];
             if !node.aabb.overlaps(b) {
                 continue;
@@ -401,8 +420,14 @@ impl Bvh {
                     }
                 }
             } else {
-                stack.push(node.right);
-                stack.push(n + 1);
+                for c in [node.right, n + 1] {
+                    if len < INLINE && spill.is_empty() {
+                        inline[len] = c;
+                        len += 1;
+                    } else {
+                        spill.push(c);
+                    }
+                }
             }
         }
     }
@@ -1041,13 +1066,28 @@ mod tests {
         let b = random_boxes(2000, 0.03, 7);
         let t = Bvh::build_with_leaf_size(&b, 3);
         let queries = random_boxes(50, 0.1, 8);
-        for q in &queries {
-            let mut got = Vec::new();
-            t.query_overlaps(q, |i| got.push(i));
-            got.sort_unstable();
+        // Whole-domain queries too: they visit every node, so the small stacks below fill up.
+        let all = [
+            Aabb::new([-2.0; 3], [2.0; 3]),
+            Aabb::new([0.0; 3], [2.0; 3]),
+        ];
+        for q in queries.iter().chain(&all) {
             let want: Vec<usize> = (0..b.len()).filter(|&i| b[i].overlaps(q)).collect();
-            assert_eq!(got, want);
+            // The stack on the call stack alone (64), and spilling to the heap (1, 2, 5).
+            let runs: [fn(&Bvh, &Aabb, &mut Vec<usize>); 4] = [
+                |t, q, got| t.query_overlaps(q, |i| got.push(i)),
+                |t, q, got| t.query_overlaps_inline::<1>(q, |i| got.push(i)),
+                |t, q, got| t.query_overlaps_inline::<2>(q, |i| got.push(i)),
+                |t, q, got| t.query_overlaps_inline::<5>(q, |i| got.push(i)),
+            ];
+            for run in runs {
+                let mut got = Vec::new();
+                run(&t, q, &mut got);
+                got.sort_unstable();
+                assert_eq!(got, want);
+            }
         }
+        assert!(t.depth() > 5, "the heap part is reached");
     }
 
     /// Nearest-item queries of both builds (SAH and Morton order) against brute force.

@@ -22,6 +22,7 @@
 
 pub mod bvh;
 pub mod complex;
+pub mod cover_grid;
 pub mod cut;
 pub mod delaunay;
 pub mod error;

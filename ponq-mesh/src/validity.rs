@@ -30,6 +30,7 @@ use rayon::prelude::*;
 use robust::{Coord, orient2d};
 
 use crate::bvh::{Aabb, Bvh};
+use crate::cover_grid::CoverGrid;
 use crate::trimesh::TriMesh;
 
 /// Outcome of [`check`] / [`check_topology`].
@@ -372,10 +373,16 @@ pub fn intersecting_face_pairs_among(mesh: &TriMesh, faces: &[usize]) -> Vec<(us
         .collect();
     let info: Vec<u8> = faces.iter().map(|&f| face_info(mesh, f)).collect();
     let bvh = Bvh::build(&boxes);
+    // Most faces are far from all of `faces`: a look at the few grid cells of their box
+    // rejects them without a descent of the hierarchy (exact, see `cover_grid`).
+    let grid = CoverGrid::new(&boxes, 1 << 20);
     let mut v: Vec<(usize, usize)> = (0..mesh.faces.len())
         .into_par_iter()
         .fold(Vec::new, |mut acc, f| {
             let b = Aabb::from_points(&mesh.triangle(f));
+            if grid.as_ref().is_some_and(|g| !g.may_overlap(&b)) {
+                return acc;
+            }
             let mut fi = None;
             bvh.query_overlaps(&b, |k| {
                 let g = faces[k];

@@ -420,8 +420,10 @@ impl Bvh {
                     }
                 }
             } else {
+                // Nothing spills while the inline part has room (it is emptied only after
+                // the spilled nodes), so this keeps one stack, last in first out.
                 for c in [node.right, n + 1] {
-                    if len < INLINE && spill.is_empty() {
+                    if len < INLINE {
                         inline[len] = c;
                         len += 1;
                     } else {

@@ -373,7 +373,7 @@ pub fn intersecting_face_pairs_among(mesh: &TriMesh, faces: &[usize]) -> Vec<(us
         .collect();
     let info: Vec<u8> = faces.iter().map(|&f| face_info(mesh, f)).collect();
     let bvh = Bvh::build(&boxes);
-    // Most faces are far from all of `faces`: a look at the few grid cells of their box
+    // Most faces are far from all of `faces`: one bit of a grid of the cells they cover
     // rejects them without a descent of the hierarchy (exact, see `cover_grid`).
     let grid = CoverGrid::new(&boxes, 1 << 20);
     let mut v: Vec<(usize, usize)> = (0..mesh.faces.len())

@@ -223,6 +223,9 @@ fn bench(
             let (_, s, mem) = measure(|| {
                 let out = n.forward(x.clone(), &frame);
                 let _ = out.occupancy.into_data();
+                // The other decoders' outputs too: a lazy (fused) GPU backend would otherwise
+                // run them inside the next timed call.
+                dev.sync().expect("device sync");
             });
             let model = models[i].clone();
             let ((), st, smem) = measure(|| {

@@ -27,6 +27,7 @@ pub mod cut;
 pub mod delaunay;
 pub mod error;
 pub mod extract;
+pub mod fan;
 pub mod flips;
 pub mod halfedge;
 pub mod io;

@@ -69,27 +69,9 @@ pub fn graph_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<bool> {
     if faces.iter().flatten().any(|&v| v as usize >= nv) {
         return vec![false; nv];
     }
-    // The corners of each vertex `v` as (next, previous) vertex of its face, grouped by `v`
-    // (a counting sort).
-    let mut start = vec![0u32; nv + 1];
-    for f in faces {
-        for &v in f {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for v in 0..nv {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut corners = vec![(0u32, 0u32); start[nv] as usize];
-    for f in faces {
-        for k in 0..3 {
-            let v = f[k] as usize;
-            corners[fill[v] as usize] = (f[(k + 1) % 3], f[(k + 2) % 3]);
-            fill[v] += 1;
-        }
-    }
-    drop(fill);
+    // The corners of each vertex `v` as (next, previous) vertex of its face, grouped by `v`.
+    let (start, corners) =
+        crate::halfedge::corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
     (0..nv)
         .into_par_iter()
         .with_min_len(1024)

@@ -64,29 +64,12 @@ impl HalfEdges {
         }
         // The outgoing half-edges of each vertex with their targets and the vertices before
         // them in their faces (compressed rows).
-        let mut start = vec![0u32; n + 1];
-        for f in faces {
-            for &v in f {
-                start[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..n {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut rows = vec![Outgoing::default(); nh];
-        for (fi, f) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let v = f[k] as usize;
-                rows[fill[v] as usize] = Outgoing {
-                    h: (3 * fi + k) as u32,
-                    target: f[(k + 1) % 3],
-                    before: f[(k + 2) % 3],
-                };
-                fill[v] += 1;
-            }
-        }
-        drop(fill);
+        let (start, rows) = corner_rows(faces, n, |fi, f, k| Outgoing {
+            h: (3 * fi + k) as u32,
+            target: f[(k + 1) % 3],
+            before: f[(k + 2) % 3],
+        });
+        debug_assert_eq!(rows.len(), nh);
         let row = |v: u32| &rows[start[v as usize] as usize..start[v as usize + 1] as usize];
         // The opposite of `h = u -> v` is the one half-edge `v -> u`; it is `prev(g)` for the
         // one outgoing `g` of `u` whose face has `v` before `u`. So each vertex's row alone
@@ -265,6 +248,36 @@ impl HalfEdges {
     pub fn degree(&self, v: u32) -> u32 {
         self.degree[v as usize]
     }
+}
+
+/// The corners of the faces grouped by vertex (compressed rows, a counting sort): the corners
+/// of vertex `v` are `rows[start[v]..start[v + 1]]`, in face order, each made by
+/// `corner(face index, face, k)` for the face's position `k` holding `v`. Every index of
+/// `faces` must be below `n`.
+pub(crate) fn corner_rows<T: Copy + Default>(
+    faces: &[[u32; 3]],
+    n: usize,
+    corner: impl Fn(usize, &[u32; 3], usize) -> T,
+) -> (Vec<u32>, Vec<T>) {
+    let mut start = vec![0u32; n + 1];
+    for f in faces {
+        for &v in f {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut rows = vec![T::default(); start[n] as usize];
+    for (fi, f) in faces.iter().enumerate() {
+        for k in 0..3 {
+            let v = f[k] as usize;
+            rows[fill[v] as usize] = corner(fi, f, k);
+            fill[v] += 1;
+        }
+    }
+    (start, rows)
 }
 
 #[cfg(test)]

@@ -4,9 +4,9 @@
 //! The faces of a closed mesh around a vertex `v` are its *fan*. [`graph_fans`] certifies `v`
 //! when, for one of the three axis projections `P` (dropping x, y or z; tried in decreasing
 //! order of the fan's summed normal's components):
-//! * the corners of `v`, faces `(v, r, r')`, as directed edges `r -> r'` form a permutation
-//!   (each vertex starts exactly one and ends exactly one; every face holding `v` is one of
-//!   them: each occurrence of `v` in a face is a corner);
+//! * the corners of `v`, faces `(v, r, r')`, form a single cycle `r_0 -> r_1 -> ... -> r_0`
+//!   of `n >= 3` distinct vertices (every face holding `v` is one of them: each occurrence of
+//!   `v` in a face is a corner);
 //! * every projected face `(P v, P r, P r')` has the same orientation `s != 0` (exact
 //!   `orient2d`): the faces are non-degenerate, and each projects one-to-one into the sector of
 //!   the plane between the rays from `P v` through `P r` and `P r'`, a sector of less than a
@@ -17,10 +17,8 @@
 //!   is its sector's orientation, so no further predicate).
 //!
 //! Seen from `P v`, each edge `P r -> P r'` sweeps its sector's angle (in `(0, pi)`, signed by
-//! `s`). The permutation's cycles are closed polygons around `P v`, each making at least one
-//! turn, so a winding number of `s` means a single cycle `r_0, r_1, ..., r_{n-1}` (`n >= 3`)
-//! making one turn: the rays through the `P r_i` follow each other in strictly increasing
-//! angle over exactly one turn. Two sectors that are not consecutive then meet only at `P v`,
+//! `s`), so a winding number of `s` means that the cycle makes one turn: the rays through the
+//! `P r_i` follow each other in strictly increasing angle over exactly one turn. Two sectors that are not consecutive then meet only at `P v`,
 //! and two consecutive ones only along their common ray, with their far corners strictly on
 //! opposite sides of it. Hence, for two faces of a certified fan (a projection one-to-one on
 //! each face maps any common point to a common point of the projections):
@@ -65,41 +63,94 @@ pub const MAX_DEGREE: usize = 64;
 /// assert!(!graph_fans(&v, &f)[0]);
 /// ```
 pub fn graph_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<bool> {
+    vertex_fans(vertices, faces, true).certified
+}
+
+/// What one pass over the corners of every vertex finds (see [`vertex_fans`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct VertexFans {
+    /// Whether each vertex's fan is certified ([`graph_fans`]); all `false` when not asked
+    /// for.
+    pub certified: Vec<bool>,
+    /// Whether the corners of every vertex that has any form a single cycle of at least 3:
+    /// faces `(v, r_0, r_1)`, `(v, r_1, r_2)`, ..., `(v, r_{n-1}, r_0)` with distinct `r_i`.
+    /// Then no face repeats an index (a face `(v, v, x)` gives `v` the corners `(v, x)` and
+    /// `(x, v)`, which lead to each other: a cycle of two, or, with another corner ending at
+    /// `x`, a corner reached from two), every edge `v r` is
+    /// in exactly two faces, one going `v -> r` and one `r -> v` (the corners starting and
+    /// ending at `r`), and the faces around each vertex are one fan: the mesh is a closed,
+    /// oriented 2-manifold. `false` when a face refers to a vertex out of range.
+    pub single_cycles: bool,
+}
+
+/// The fans of every vertex of the mesh `(vertices, faces)`, in one parallel pass over the
+/// corners grouped by vertex: whether each forms a single cycle and, if `certify`, whether
+/// it is certified ([module docs](self)).
+pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> VertexFans {
     let nv = vertices.len();
     if faces.iter().flatten().any(|&v| v as usize >= nv) {
-        return vec![false; nv];
+        return VertexFans {
+            certified: vec![false; nv],
+            single_cycles: false,
+        };
     }
     // The corners of each vertex `v` as (next, previous) vertex of its face, grouped by `v`.
     let (start, corners) =
         crate::halfedge::corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
-    (0..nv)
+    let per_vertex: Vec<(bool, bool)> = (0..nv)
         .into_par_iter()
         .with_min_len(1024)
         .map(|v| {
             let c = &corners[start[v] as usize..start[v + 1] as usize];
-            certify(vertices, v, c)
+            let cycle = one_cycle(c);
+            (
+                c.is_empty() || cycle,
+                certify && cycle && certify_cycle(vertices, v, c),
+            )
         })
-        .collect()
+        .collect();
+    VertexFans {
+        single_cycles: per_vertex.iter().all(|x| x.0),
+        certified: per_vertex.into_iter().map(|x| x.1).collect(),
+    }
 }
 
-/// Whether the fan of `v`, given by its corners `(r, r')` (face `(v, r, r')`), is certified.
-fn certify(vertices: &[[f64; 3]], v: usize, corners: &[(u32, u32)]) -> bool {
+/// Whether the corners `(r, r')` of a vertex form a single cycle of at least 3: from the
+/// first, each corner's `r'` starts exactly one corner, and following them comes back to the
+/// first after visiting all. (Each corner is then the only one starting at its `r`, so the
+/// `r` are distinct, and so are the `r'`.)
+fn one_cycle(corners: &[(u32, u32)]) -> bool {
     let n = corners.len();
-    if !(3..=MAX_DEGREE).contains(&n) {
+    if n < 3 {
         return false;
     }
-    // The corners as directed edges r -> r' form a permutation: each vertex is the end of
-    // exactly one corner iff it is the start of exactly one (a start repeated would be the
-    // end of one corner only, and the other way round). Counted without early exits: the
-    // compiler makes these small loops branch-free.
-    let once = |x: u32, end: bool| {
-        corners
-            .iter()
-            .map(|c| ((if end { c.1 } else { c.0 }) == x) as u32)
-            .sum::<u32>()
-            == 1
-    };
-    if !corners.iter().all(|&(a, b)| once(b, false) & once(a, true)) {
+    let mut cur = 0usize;
+    for step in 0..n {
+        let next = corners[cur].1;
+        // Without early exit (branch-free for the small degrees of most vertices).
+        let (mut found, mut count) = (0usize, 0u32);
+        for (j, c) in corners.iter().enumerate() {
+            let hit = c.0 == next;
+            found = if hit { j } else { found };
+            count += hit as u32;
+        }
+        if count != 1 {
+            return false;
+        }
+        cur = found;
+        if cur == 0 {
+            // Back at the start: all corners visited iff this took n steps (a corner seen
+            // twice before would be on a cycle without the first, never coming back).
+            return step == n - 1;
+        }
+    }
+    false
+}
+
+/// Whether the fan of `v`, given by its corners `(r, r')` (face `(v, r, r')`) forming a single
+/// cycle ([`one_cycle`]), is certified.
+fn certify_cycle(vertices: &[[f64; 3]], v: usize, corners: &[(u32, u32)]) -> bool {
+    if corners.len() > MAX_DEGREE {
         return false;
     }
     let p = vertices[v];
@@ -129,8 +180,8 @@ fn certify(vertices: &[[f64; 3]], v: usize, corners: &[(u32, u32)]) -> bool {
         .any(|&axis| graph_over(vertices, p, corners, axis))
 }
 
-/// Whether the fan of the point `p` with the corners `corners` (a permutation, see
-/// [`certify`]) projects one-to-one onto the plane dropping coordinate `axis`: sectors of one
+/// Whether the fan of the point `p` with the corners `corners` (one cycle, see
+/// [`one_cycle`]) projects one-to-one onto the plane dropping coordinate `axis`: sectors of one
 /// orientation, and one turn in all.
 fn graph_over(vertices: &[[f64; 3]], p: [f64; 3], corners: &[(u32, u32)], axis: u8) -> bool {
     let proj = |i: u32| {

@@ -35,9 +35,14 @@ pub fn boundary_faces(cx: &TetComplex, labels: &[Label]) -> Vec<[u32; 3]> {
 /// Boundary of the union of the inside tets, oriented outward, vertices re-indexed to the
 /// used ones. Also returns, for each output vertex, its Delaunay vertex index.
 pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>) {
+    extract_faces(cx, boundary_faces(cx, labels))
+}
+
+/// [`extract_boundary`] of boundary faces already computed ([`boundary_faces`]).
+pub fn extract_faces(cx: &TetComplex, faces: Vec<[u32; 3]>) -> (TriMesh, Vec<u32>) {
     let mut mesh = TriMesh {
         vertices: cx.dt.vertices.clone(),
-        faces: boundary_faces(cx, labels),
+        faces,
     };
     let back = mesh.remove_unreferenced_vertices();
     (mesh, back)

@@ -102,7 +102,7 @@ pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> 
         .with_min_len(1024)
         .map(|v| {
             let c = &corners[start[v] as usize..start[v + 1] as usize];
-            let cycle = one_cycle(c);
+            let cycle = c.len() >= 3 && one_cycle(c);
             (
                 c.is_empty() || cycle,
                 certify && cycle && certify_cycle(vertices, v, c),
@@ -115,13 +115,13 @@ pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> 
     }
 }
 
-/// Whether the corners `(r, r')` of a vertex form a single cycle of at least 3: from the
-/// first, each corner's `r'` starts exactly one corner, and following them comes back to the
-/// first after visiting all. (Each corner is then the only one starting at its `r`, so the
-/// `r` are distinct, and so are the `r'`.)
-fn one_cycle(corners: &[(u32, u32)]) -> bool {
+/// Whether the directed edges `(r, r')` (the corners of a vertex: faces `(v, r, r')`) form
+/// one simple cycle: from the first, each edge's `r'` starts exactly one edge, and following
+/// them comes back to the first after visiting all. (Each edge is then the only one starting
+/// at its `r`, so the `r` are distinct, and so are the `r'`.) `false` for no edge.
+pub(crate) fn one_cycle(corners: &[(u32, u32)]) -> bool {
     let n = corners.len();
-    if n < 3 {
+    if n == 0 {
         return false;
     }
     let mut cur = 0usize;

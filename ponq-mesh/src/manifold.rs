@@ -137,102 +137,52 @@ fn flip_cost(cx: &TetComplex, labels: &[Label], set: &[u32], from: Label) -> f64
     delta
 }
 
-/// True when the directed edges `(start, end)` form one simple cycle: every link vertex
-/// starts exactly one edge and ends exactly one, and following the edges from the first one
-/// visits all of them.
-fn is_one_cycle(edges: &[(u32, u32)]) -> bool {
-    let n = edges.len();
-    let mut buf = [(0u32, 0u32); 32];
-    let mut heap = Vec::new();
-    let e: &mut [(u32, u32)] = if n <= buf.len() {
-        buf[..n].copy_from_slice(edges);
-        &mut buf[..n]
-    } else {
-        heap.extend_from_slice(edges);
-        &mut heap
-    };
-    e.sort_unstable();
-    if e.windows(2).any(|w| w[0].0 == w[1].0) {
-        return false;
-    }
-    // Starts are distinct; follow the successor map (n steps at most).
-    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i].1);
-    let first = e[0].0;
-    let mut x = e[0].1;
-    let mut steps = 1;
-    while x != first {
-        match next(x) {
-            Some(y) if steps < n => {
-                x = y;
-                steps += 1;
-            }
-            _ => return false,
-        }
-    }
-    // Back at the start after visiting every edge once: with distinct starts the ends are
-    // then distinct too, and the cycle is the whole link.
-    steps == n
-}
-
 /// Vertices where the current inside/outside boundary is not a single disc: their boundary
 /// triangles' opposite edges (the vertex's link in the surface) do not form one simple cycle.
 /// A cheap O(#faces) scan that seeds the repair.
 pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
+    nonmanifold_vertices_of(&boundary_faces(cx, labels), cx.dt.vertices.len())
+}
+
+/// [`nonmanifold_surface_vertices`] of the boundary `faces` over `nv` vertices: the link of
+/// `v` in face `(v, b, c)` is the edge `b -> c`, the corner of `v` ([`crate::fan::one_cycle`]
+/// on the corners grouped by vertex, in parallel).
+fn nonmanifold_vertices_of(faces: &[[u32; 3]], nv: usize) -> Vec<u32> {
     use rayon::prelude::*;
-    let faces = boundary_faces(cx, labels);
-    // Per vertex range (one per thread), the link edges of its vertices: the edge b -> c
-    // opposite a in each face (a, b, c). Each thread scans all faces and checks its own
-    // vertices, so no thread waits for another and nothing is shared.
-    let nv = cx.dt.vertices.len();
-    let parts = rayon::current_num_threads().clamp(1, 16);
-    let bounds: Vec<usize> = (0..=parts).map(|i| nv * i / parts).collect();
-    let found: Vec<Vec<u32>> = (0..parts)
+    let (start, corners) =
+        crate::halfedge::corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
+    (0..nv as u32)
         .into_par_iter()
-        .map(|c| {
-            let (lo, hi) = (bounds[c], bounds[c + 1]);
-            // CSR of the range: counts, offsets, then the edges.
-            let mut offsets = vec![0u32; hi - lo + 1];
-            for f in &faces {
-                for &v in f {
-                    if (lo..hi).contains(&(v as usize)) {
-                        offsets[v as usize - lo + 1] += 1;
-                    }
-                }
-            }
-            for i in 0..hi - lo {
-                offsets[i + 1] += offsets[i];
-            }
-            let mut fill = offsets.clone();
-            let mut link = vec![(0u32, 0u32); offsets[hi - lo] as usize];
-            for &[a, b, c] in &faces {
-                for (v, e) in [(a, (b, c)), (b, (c, a)), (c, (a, b))] {
-                    if (lo..hi).contains(&(v as usize)) {
-                        let i = &mut fill[v as usize - lo];
-                        link[*i as usize] = e;
-                        *i += 1;
-                    }
-                }
-            }
-            (lo..hi)
-                .filter(|&v| {
-                    let edges = &link[offsets[v - lo] as usize..offsets[v - lo + 1] as usize];
-                    !edges.is_empty() && !is_one_cycle(edges)
-                })
-                .map(|v| v as u32)
-                .collect()
+        .with_min_len(1024)
+        .filter(|&v| {
+            let c = &corners[start[v as usize] as usize..start[v as usize + 1] as usize];
+            !c.is_empty() && !crate::fan::one_cycle(c)
         })
-        .collect();
-    found.concat()
+        .collect()
 }
 
 /// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.
 /// `labels` must hold no [`Label::Unknown`].
 pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
+    make_manifold_keeping_faces(cx, labels).0
+}
+
+/// [`make_manifold`], also returning the boundary faces ([`boundary_faces`]) when no tet
+/// changed its label (the usual case): the faces the extraction would compute again.
+pub fn make_manifold_keeping_faces(
+    cx: &TetComplex,
+    labels: &mut [Label],
+) -> (ManifoldStats, Option<Vec<[u32; 3]>>) {
     let mut stats = ManifoldStats::default();
     let nv = cx.dt.vertices.len();
+    let faces = boundary_faces(cx, labels);
+    let mut work: Vec<u32> = nonmanifold_vertices_of(&faces, nv);
+    if work.is_empty() {
+        return (stats, Some(faces));
+    }
+    drop(faces);
     let mut flipped = vec![false; labels.len()];
     let mut queued = vec![false; nv];
-    let mut work: Vec<u32> = nonmanifold_surface_vertices(cx, labels);
     for &v in &work {
         queued[v as usize] = true;
     }
@@ -301,5 +251,5 @@ pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
             work.push(v);
         }
     }
-    stats
+    (stats, None)
 }

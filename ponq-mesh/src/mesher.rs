@@ -6,8 +6,8 @@ use crate::complex::{Label, TetComplex};
 use crate::cut::{CutStats, min_cut};
 use crate::delaunay::Delaunay;
 use crate::error::{Error, Result};
-use crate::extract::extract_boundary;
-use crate::manifold::{ManifoldStats, make_manifold};
+use crate::extract::{extract_boundary, extract_faces};
+use crate::manifold::{ManifoldStats, make_manifold_keeping_faces};
 use crate::open_surface::cull_open;
 use crate::ponq::Ponq;
 use crate::quadric::{Quadric, SVD_CUTOFF};
@@ -589,13 +589,18 @@ fn mesh_pass(
     stats.times.cut += t3.elapsed();
 
     let t4 = Instant::now();
+    let mut faces = None;
     if opts.manifold {
-        stats.manifold = make_manifold(&cx, &mut labels);
+        // The repair's boundary faces are the output's when it changed nothing.
+        (stats.manifold, faces) = make_manifold_keeping_faces(&cx, &mut labels);
     }
     stats.times.manifold += t4.elapsed();
 
     let t5 = Instant::now();
-    let (mesh, back) = extract_boundary(&cx, &labels);
+    let (mesh, back) = match faces {
+        Some(faces) => extract_faces(&cx, faces),
+        None => extract_boundary(&cx, &labels),
+    };
     stats.times.extraction += t5.elapsed();
     Ok(Pass {
         cx,

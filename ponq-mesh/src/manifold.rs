@@ -253,3 +253,116 @@ pub fn make_manifold_keeping_faces(
     }
     (stats, None)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::delaunay::Delaunay;
+    use crate::quadric::Quadric;
+    use std::collections::HashMap;
+
+    /// Random points in the unit cube inside the 8 corners of a larger box (protective), and
+    /// random labels: inside with probability `p_in` (never a tet of a corner).
+    fn random_complex(seed: u64, n: usize, p_in: f64) -> (TetComplex, Vec<Label>) {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut r = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut points: Vec<[f64; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
+        for k in 0..8 {
+            points.push([0, 1, 2].map(|a| if k >> a & 1 == 1 { 3.0 } else { -2.0 }));
+        }
+        let dt = Delaunay::new(&points).expect("finite points");
+        let nv = dt.vertices.len();
+        let protective: Vec<bool> = (0..nv).map(|v| v >= n).collect();
+        let cx = TetComplex::new(
+            dt,
+            vec![[0.0, 0.0, 1.0]; nv],
+            vec![[0.0, 0.0, 1.0]; nv],
+            vec![Quadric::zero(); nv],
+            protective,
+            0.1,
+            1.0,
+        );
+        let labels = (0..cx.n_tets() as u32)
+            .map(|t| {
+                if !cx.touches_protective(t) && r() < p_in {
+                    Label::Inside
+                } else {
+                    Label::Outside
+                }
+            })
+            .collect();
+        (cx, labels)
+    }
+
+    /// Non-manifold surface vertices by a plain reference: the link of each vertex as a map
+    /// from start to end, followed from one edge.
+    fn reference(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
+        let mut links: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
+        for [a, b, c] in boundary_faces(cx, labels) {
+            links.entry(a).or_default().push((b, c));
+            links.entry(b).or_default().push((c, a));
+            links.entry(c).or_default().push((a, b));
+        }
+        let mut bad: Vec<u32> = links
+            .into_iter()
+            .filter(|(_, e)| {
+                let next: HashMap<u32, u32> = e.iter().copied().collect();
+                if next.len() != e.len() {
+                    return true;
+                }
+                let (mut x, mut steps) = (e[0].1, 1);
+                while x != e[0].0 {
+                    match next.get(&x) {
+                        Some(&y) if steps < e.len() => (x, steps) = (y, steps + 1),
+                        _ => return true,
+                    }
+                }
+                steps != e.len()
+            })
+            .map(|(v, _)| v)
+            .collect();
+        bad.sort_unstable();
+        bad
+    }
+
+    #[test]
+    fn scan_finds_the_reference_vertices_and_the_repair_leaves_none() {
+        let mut repaired = 0;
+        for seed in 0..12 {
+            let (cx, mut labels) = random_complex(seed, 150, [0.1, 0.3, 0.6][seed as usize % 3]);
+            let found = nonmanifold_surface_vertices(&cx, &labels);
+            assert_eq!(found, reference(&cx, &labels), "seed {seed}");
+            let before = labels.clone();
+            let (stats, faces) = make_manifold_keeping_faces(&cx, &mut labels);
+            match faces {
+                // Kept only when nothing changed: then they are the boundary's.
+                Some(f) => {
+                    assert!(found.is_empty() && labels == before);
+                    assert_eq!(f, boundary_faces(&cx, &labels));
+                }
+                None => assert!(!found.is_empty()),
+            }
+            repaired += (stats.flipped_tets > 0) as usize;
+            assert!(
+                nonmanifold_surface_vertices(&cx, &labels).is_empty(),
+                "seed {seed}"
+            );
+        }
+        // Random labels make non-manifold boundaries: the repair was exercised.
+        assert!(repaired >= 6, "{repaired}");
+        // One inside tet: a manifold boundary, its four faces kept for the extraction.
+        let (cx, mut labels) = random_complex(99, 50, 0.0);
+        let t = (0..cx.n_tets() as u32)
+            .find(|&t| !cx.touches_protective(t))
+            .unwrap();
+        labels[t as usize] = Label::Inside;
+        let (stats, faces) = make_manifold_keeping_faces(&cx, &mut labels);
+        assert_eq!(stats.flipped_tets, 0);
+        assert_eq!(faces.map(|f| f.len()), Some(4));
+    }
+}

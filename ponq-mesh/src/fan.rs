@@ -18,9 +18,9 @@
 //!
 //! Seen from `P v`, each edge `P r -> P r'` sweeps its sector's angle (in `(0, pi)`, signed by
 //! `s`), so a winding number of `s` means that the cycle makes one turn: the rays through the
-//! `P r_i` follow each other in strictly increasing angle over exactly one turn. Two sectors that are not consecutive then meet only at `P v`,
-//! and two consecutive ones only along their common ray, with their far corners strictly on
-//! opposite sides of it. Hence, for two faces of a certified fan (a projection one-to-one on
+//! `P r_i` follow each other in strictly increasing angle over exactly one turn. Two sectors
+//! that are not consecutive then meet only at `P v`, and two consecutive ones only along their
+//! common ray, with their far corners strictly on opposite sides of it. Hence, for two faces of a certified fan (a projection one-to-one on
 //! each face maps any common point to a common point of the projections):
 //! * sharing only `v`, they meet only at `v`;
 //! * sharing an edge `v r_i`, they are not folded onto each other (coplanar with their third
@@ -37,7 +37,8 @@
 use rayon::prelude::*;
 use robust::{Coord, orient2d};
 
-/// Vertices of higher degree are not certified (their pairs are tested one by one).
+/// Vertices of higher degree are not certified (their pairs are tested one by one): the
+/// certificate's cost stays linear in the corners.
 pub const MAX_DEGREE: usize = 64;
 
 /// `certified[v]` for every vertex of the mesh `(vertices, faces)`: whether the fan of `v` is a
@@ -124,10 +125,20 @@ pub(crate) fn one_cycle(corners: &[(u32, u32)]) -> bool {
     if n == 0 {
         return false;
     }
+    if n > SMALL_DEGREE {
+        one_cycle_sorted(corners)
+    } else {
+        one_cycle_quadratic(corners)
+    }
+}
+
+/// [`one_cycle`] for a few corners: at each step a search of all of them, without early exit
+/// (branch-free).
+fn one_cycle_quadratic(corners: &[(u32, u32)]) -> bool {
+    let n = corners.len();
     let mut cur = 0usize;
     for step in 0..n {
         let next = corners[cur].1;
-        // Without early exit (branch-free for the small degrees of most vertices).
         let (mut found, mut count) = (0usize, 0u32);
         for (j, c) in corners.iter().enumerate() {
             let hit = c.0 == next;
@@ -145,6 +156,33 @@ pub(crate) fn one_cycle(corners: &[(u32, u32)]) -> bool {
         }
     }
     false
+}
+
+/// Degrees up to this are tested by [`one_cycle_quadratic`], larger ones by
+/// [`one_cycle_sorted`].
+const SMALL_DEGREE: usize = 32;
+
+/// [`one_cycle`] in `O(n log n)`: the corners sorted by first vertex (a repeated one fails),
+/// then the successors found by binary search.
+fn one_cycle_sorted(corners: &[(u32, u32)]) -> bool {
+    let n = corners.len();
+    let mut e = corners.to_vec();
+    e.sort_unstable();
+    if e.windows(2).any(|w| w[0].0 == w[1].0) {
+        return false;
+    }
+    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i].1);
+    let (first, mut x, mut steps) = (corners[0].0, corners[0].1, 1);
+    while x != first {
+        match next(x) {
+            Some(y) if steps < n => {
+                x = y;
+                steps += 1;
+            }
+            _ => return false,
+        }
+    }
+    steps == n
 }
 
 /// Whether the fan of `v`, given by its corners `(r, r')` (face `(v, r, r')`) forming a single
@@ -261,6 +299,26 @@ mod tests {
     }
 
     #[test]
+    fn a_vertex_of_high_degree_is_one_cycle_but_not_certified() {
+        let (v, f) = fan(&circle(200, 1, |_| 0.0));
+        let fans = vertex_fans(&v, &f, true);
+        assert!(fans.single_cycles);
+        assert!(!fans.certified[0]);
+        // Two such fans at one vertex: not one cycle.
+        let (mut v, mut f) = fan(&circle(100, 1, |_| 0.0));
+        let base = v.len() as u32;
+        v.extend(
+            circle(100, 1, |_| 0.0)
+                .iter()
+                .map(|p| [p[0], p[1], p[2] + 2.0]),
+        );
+        for i in 0..100 {
+            f.push([0, base + i, base + (i + 1) % 100]);
+        }
+        assert!(!vertex_fans(&v, &f, false).single_cycles);
+    }
+
+    #[test]
     fn a_flat_or_wavy_fan_is_certified() {
         for z in [|_| 0.0, |i: usize| 0.3 * (i % 2) as f64] {
             let (v, f) = fan(&circle(7, 1, z));
@@ -327,6 +385,47 @@ mod tests {
         assert!(!graph_fans(&v, &f)[0]);
         let m = crate::TriMesh::new(v, f).unwrap();
         assert!(crate::validity::check(&m).self_intersections > 0);
+    }
+
+    #[test]
+    fn both_cycle_tests_agree() {
+        // Random corner sets over few vertices (repeats, dead ends, several cycles) and
+        // shuffled cycles, small and large.
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        let mut r = |m: u32| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s % m as u64) as u32
+        };
+        let (mut cycles, mut others) = (0, 0);
+        for case in 0..4000 {
+            let n = 1 + r(if case % 2 == 0 { 8 } else { 80 }) as usize;
+            let mut c: Vec<(u32, u32)> = if case % 3 == 0 {
+                (0..n).map(|_| (r(n as u32 + 2), r(n as u32 + 2))).collect()
+            } else {
+                // A cycle through a shuffled ring, sometimes with one end changed.
+                let mut ring: Vec<u32> = (0..n as u32).map(|i| 3 * i + 1).collect();
+                for i in (1..n).rev() {
+                    ring.swap(i, r(i as u32 + 1) as usize);
+                }
+                let mut c: Vec<(u32, u32)> = (0..n).map(|i| (ring[i], ring[(i + 1) % n])).collect();
+                if case % 3 == 2 {
+                    let i = r(n as u32) as usize;
+                    c[i].1 = ring[r(n as u32) as usize];
+                }
+                c
+            };
+            for i in (1..c.len()).rev() {
+                c.swap(i, r(i as u32 + 1) as usize);
+            }
+            // The quadratic test whatever the size.
+            let small = one_cycle_quadratic(&c);
+            assert_eq!(small, one_cycle_sorted(&c), "{c:?}");
+            assert_eq!(one_cycle(&c), small);
+            if small { cycles += 1 } else { others += 1 }
+        }
+        assert!(cycles > 500 && others > 500, "{cycles} / {others}");
     }
 
     #[test]

@@ -351,8 +351,6 @@ fn parallel_insertion_gives_the_same_triangulation() {
         for threads in [2, 3, 8] {
             let par = Delaunay::with_threads(pts, threads).unwrap();
             assert_eq!(par.stats.workers, threads);
-            assert!(par.stats.parallel_insertions > pts.len() / 4);
-            assert!(!par.stats.parallel_stopped, "{name}: {:?}", par.stats);
             check_structure(&par);
             assert_eq!(par.vertex_of_point, one.vertex_of_point, "{name}");
             assert_eq!(
@@ -364,6 +362,18 @@ fn parallel_insertion_gives_the_same_triangulation() {
             assert_eq!(par.tets, one.tets, "{name}: tet order differs");
             assert_eq!(par.neighbors, one.neighbors, "{name}: neighbours differ");
         }
+        // These inputs do not make the workers collide: the parallel phase inserts most
+        // vertices and does not stop. Timing decides collisions, though: a worker descheduled
+        // in the middle of an insertion holds its locks for a whole time slice, and on a
+        // loaded machine (the other tests of this binary run alongside) the others back off
+        // meanwhile and may stop, which is what the stop rule is for (seen once in six runs of
+        // this binary with 3 workers on 2 cores: 312 of ~1,300 attempts backed off). So one of
+        // a few two-worker runs must show it.
+        let calm = (0..5).find_map(|_| {
+            let s = Delaunay::with_threads(pts, 2).unwrap().stats;
+            (!s.parallel_stopped && s.parallel_insertions > pts.len() / 4).then_some(s)
+        });
+        assert!(calm.is_some(), "{name}: two workers stopped in 5 runs of 5");
         // More workers than threads: a worker that finishes its own chunks before the others
         // have started takes theirs (work stealing); the result is still the same.
         let pool = rayon::ThreadPoolBuilder::new()

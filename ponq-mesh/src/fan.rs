@@ -298,6 +298,19 @@ mod tests {
             .collect()
     }
 
+    /// [`fan`] of `n` faces, and a second fan of `n` faces at the centre (its ring raised):
+    /// a vertex with two fans.
+    fn two_fans(n: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+        let (mut v, mut f) = fan(&circle(n as usize, 1, |_| 0.0));
+        let base = v.len() as u32;
+        let ring = circle(n as usize, 1, |_| 0.0);
+        v.extend(ring.iter().map(|p| [p[0], p[1], p[2] + 2.0]));
+        for i in 0..n {
+            f.push([0, base + i, base + (i + 1) % n]);
+        }
+        (v, f)
+    }
+
     #[test]
     fn a_vertex_of_high_degree_is_one_cycle_but_not_certified() {
         let (v, f) = fan(&circle(200, 1, |_| 0.0));
@@ -305,16 +318,7 @@ mod tests {
         assert!(fans.single_cycles);
         assert!(!fans.certified[0]);
         // Two such fans at one vertex: not one cycle.
-        let (mut v, mut f) = fan(&circle(100, 1, |_| 0.0));
-        let base = v.len() as u32;
-        v.extend(
-            circle(100, 1, |_| 0.0)
-                .iter()
-                .map(|p| [p[0], p[1], p[2] + 2.0]),
-        );
-        for i in 0..100 {
-            f.push([0, base + i, base + (i + 1) % 100]);
-        }
+        let (v, f) = two_fans(100);
         assert!(!vertex_fans(&v, &f, false).single_cycles);
     }
 
@@ -355,16 +359,7 @@ mod tests {
         f.push(f[0]);
         assert!(!graph_fans(&v, &f)[0]);
         // Two fans glued at the centre.
-        let (mut v, mut f) = fan(&circle(5, 1, |_| 0.0));
-        let base = v.len() as u32;
-        v.extend(
-            circle(5, 1, |_| 0.0)
-                .iter()
-                .map(|p| [p[0], p[1], p[2] + 2.0]),
-        );
-        for i in 0..5 {
-            f.push([0, base + i, base + (i + 1) % 5]);
-        }
+        let (v, f) = two_fans(5);
         assert!(!graph_fans(&v, &f)[0]);
     }
 

@@ -20,8 +20,9 @@
 //! `s`), so a winding number of `s` means that the cycle makes one turn: the rays through the
 //! `P r_i` follow each other in strictly increasing angle over exactly one turn. Two sectors
 //! that are not consecutive then meet only at `P v`, and two consecutive ones only along their
-//! common ray, with their far corners strictly on opposite sides of it. Hence, for two faces of a certified fan (a projection one-to-one on
-//! each face maps any common point to a common point of the projections):
+//! common ray, with their far corners strictly on opposite sides of it. Hence, for two faces of
+//! a certified fan (a projection one-to-one on each face maps any common point to a common
+//! point of the projections):
 //! * sharing only `v`, they meet only at `v`;
 //! * sharing an edge `v r_i`, they are not folded onto each other (coplanar with their third
 //!   corners on the same side of the edge: the projection is one-to-one on their common plane
@@ -35,7 +36,9 @@
 //! only leaves its pairs to the exact pair test.
 
 use rayon::prelude::*;
-use robust::{Coord, orient2d};
+
+use crate::validity::{o2, proj};
+use crate::vec3::{cross, sub};
 
 /// Vertices of higher degree are not certified (their pairs are tested one by one): the
 /// certificate's cost stays linear in the corners.
@@ -197,10 +200,10 @@ fn certify_cycle(vertices: &[[f64; 3]], v: usize, corners: &[(u32, u32)]) -> boo
     for &(a, b) in corners {
         let (qa, qb) = (vertices[a as usize], vertices[b as usize]);
         finite &= qa.iter().chain(&qb).all(|x| x.is_finite());
-        let (a, b) = (sub(qa, p), sub(qb, p));
-        normal[0] += a[1] * b[2] - a[2] * b[1];
-        normal[1] += a[2] * b[0] - a[0] * b[2];
-        normal[2] += a[0] * b[1] - a[1] * b[0];
+        let c = cross(sub(qa, p), sub(qb, p));
+        for k in 0..3 {
+            normal[k] += c[k];
+        }
     }
     if !finite {
         return false;
@@ -222,23 +225,7 @@ fn certify_cycle(vertices: &[[f64; 3]], v: usize, corners: &[(u32, u32)]) -> boo
 /// [`one_cycle`]) projects one-to-one onto the plane dropping coordinate `axis`: sectors of one
 /// orientation, and one turn in all.
 fn graph_over(vertices: &[[f64; 3]], p: [f64; 3], corners: &[(u32, u32)], axis: u8) -> bool {
-    let proj = |i: u32| {
-        let q = vertices[i as usize];
-        match axis {
-            0 => Coord { x: q[1], y: q[2] },
-            1 => Coord { x: q[2], y: q[0] },
-            _ => Coord { x: q[0], y: q[1] },
-        }
-    };
-    let o = match axis {
-        0 => Coord { x: p[1], y: p[2] },
-        1 => Coord { x: p[2], y: p[0] },
-        _ => Coord { x: p[0], y: p[1] },
-    };
-    let sign = |a: Coord<f64>, b: Coord<f64>| {
-        let d = orient2d(o, a, b);
-        (d > 0.0) as i32 - (d < 0.0) as i32
-    };
+    let o = proj(&p, axis);
     // Every sector turns the same way `s`, by less than a half-turn; and the winding number
     // of the corners' edges around `o` is `s`. Each edge sweeps (seen from `o`) the angle of
     // its sector, so the winding number is the number of turns, signed by `s`. It is counted
@@ -248,8 +235,11 @@ fn graph_over(vertices: &[[f64; 3]], p: [f64; 3], corners: &[(u32, u32)], axis: 
     let mut s = 0;
     let mut winding = 0i32;
     for &(a, b) in corners {
-        let (ra, rb) = (proj(a), proj(b));
-        let t = sign(ra, rb);
+        let (ra, rb) = (
+            proj(&vertices[a as usize], axis),
+            proj(&vertices[b as usize], axis),
+        );
+        let t = o2(o, ra, rb);
         if t == 0 || (s != 0 && t != s) {
             return false;
         }
@@ -260,12 +250,7 @@ fn graph_over(vertices: &[[f64; 3]], p: [f64; 3], corners: &[(u32, u32)], axis: 
             winding -= (rb.y <= o.y && t < 0) as i32;
         }
     }
-    winding == s
-}
-
-#[inline]
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    winding == i32::from(s)
 }
 
 #[cfg(test)]

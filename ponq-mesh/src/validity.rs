@@ -674,7 +674,7 @@ fn o3(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i8 {
 
 /// Exact sign of `orient2d(a, b, c)`.
 #[inline]
-fn o2(a: Coord<f64>, b: Coord<f64>, c: Coord<f64>) -> i8 {
+pub(crate) fn o2(a: Coord<f64>, b: Coord<f64>, c: Coord<f64>) -> i8 {
     sign(orient2d(a, b, c))
 }
 
@@ -691,7 +691,7 @@ fn sign(x: f64) -> i8 {
 
 /// Projection dropping coordinate `axis`.
 #[inline]
-fn proj(p: &[f64; 3], axis: u8) -> Coord<f64> {
+pub(crate) fn proj(p: &[f64; 3], axis: u8) -> Coord<f64> {
     match axis {
         0 => Coord { x: p[1], y: p[2] },
         1 => Coord { x: p[2], y: p[0] },

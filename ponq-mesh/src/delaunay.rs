@@ -1398,6 +1398,57 @@ fn canonical_rotation(tv: [u32; 4]) -> u8 {
 /// Buckets of at most this many tets are sorted by rank (see [`sort_bucket`]).
 const RANK_SORT_MAX: usize = 24;
 
+/// Bins of the key histogram [`balanced_bounds`] cuts at.
+const BALANCE_BINS: usize = 1024;
+
+/// Vertex bounds `0 = b_0 <= b_1 <= ... <= b_parts = n` that cut the output into `parts`
+/// ranges of sort keys (largest vertex, [`NONE`] for no output tet) holding about as many
+/// tets each, from a histogram of the keys in [`BALANCE_BINS`] bins (each part within one
+/// bin's tets of its share). Equal vertex ranges are not balanced: a tet's key is its newest
+/// vertex, and the last BRIO round, about half the vertices, makes most of the tets (59% in
+/// the upper half at 109k points). The bounds change which thread writes which part of the
+/// output, never the output.
+fn balanced_bounds(key: &[u32], n: u32, parts: usize) -> Vec<u32> {
+    use rayon::prelude::*;
+    let width = n.div_ceil(BALANCE_BINS as u32).max(1);
+    let bins = n.div_ceil(width) as usize;
+    let hist = key
+        .par_chunks(1 << 16)
+        .fold(
+            || vec![0usize; bins],
+            |mut h, chunk| {
+                for &f in chunk {
+                    if f < n {
+                        h[(f / width) as usize] += 1;
+                    }
+                }
+                h
+            },
+        )
+        .reduce(
+            || vec![0usize; bins],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    let total: usize = hist.iter().sum();
+    let mut bounds = Vec::with_capacity(parts + 1);
+    bounds.push(0);
+    let (mut bin, mut below) = (0usize, 0usize);
+    for i in 1..parts {
+        // The first bin edge with at least the first i parts' share of the tets below it.
+        let target = total * i / parts;
+        while bin < bins && below < target {
+            below += hist[bin];
+            bin += 1;
+        }
+        bounds.push((bin as u32 * width).min(n));
+    }
+    bounds.push(n);
+    bounds
+}
+
 /// Scratch space of [`sort_bucket`].
 struct BucketScratch {
     ranked: [(u128, [u32; 4], [u32; 4], u32); RANK_SORT_MAX],
@@ -1824,9 +1875,7 @@ impl Builder {
         // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
-        let bounds: Vec<u32> = (0..=parts)
-            .map(|i| (n as usize * i / parts) as u32)
-            .collect();
+        let bounds = balanced_bounds(&key, n, parts);
         let counts: Vec<Vec<u32>> = (0..parts)
             .into_par_iter()
             .map(|c| {
@@ -2031,6 +2080,54 @@ impl Builder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The output split: bounds from 0 to n, never decreasing, each part within one bin's
+    /// tets of an equal share (the keys skewed towards the newest vertices, as the output's
+    /// are; `NONE` keys ignored), for any number of parts, vertex counts below and above the
+    /// bin count, and no key at all.
+    #[test]
+    fn balanced_bounds_split_the_keys_evenly() {
+        let mut rng = SplitMix(7);
+        for (n, len, parts) in [
+            (100_000u32, 700_000usize, 2usize),
+            (100_000, 700_000, 3),
+            (5_000, 30_000, 16),
+            (37, 300, 4),
+            (1, 10, 2),
+            (1_000, 0, 2),
+        ] {
+            let key: Vec<u32> = (0..len)
+                .map(|_| {
+                    let r = rng.next();
+                    if r % 10 == 0 {
+                        NONE
+                    } else {
+                        // The larger of two uniform draws: most keys in the upper half.
+                        ((r >> 8) % n as u64).max((r >> 36) % n as u64) as u32
+                    }
+                })
+                .collect();
+            let b = balanced_bounds(&key, n, parts);
+            assert_eq!(b.len(), parts + 1);
+            assert_eq!((b[0], b[parts]), (0, n));
+            assert!(b.windows(2).all(|w| w[0] <= w[1]), "{b:?}");
+            // The most keys in one bin.
+            let width = n.div_ceil(BALANCE_BINS as u32).max(1);
+            let mut per_bin = vec![0usize; BALANCE_BINS];
+            key.iter()
+                .filter(|&&f| f < n)
+                .for_each(|&f| per_bin[(f / width) as usize] += 1);
+            let bin_max = per_bin.iter().copied().max().unwrap_or(0);
+            let total = key.iter().filter(|&&f| f < n).count();
+            for w in b.windows(2) {
+                let inside = key.iter().filter(|&&f| f >= w[0] && f < w[1]).count();
+                assert!(
+                    inside.abs_diff(total / parts) <= bin_max + parts,
+                    "n {n} parts {parts}: {inside} of {total} in {w:?}"
+                );
+            }
+        }
+    }
 
     /// Skilling's transpose method as usually written, with branches.
     fn hilbert_index_reference(mut x: [u32; 3], bits: u32) -> u64 {

@@ -2099,7 +2099,7 @@ mod tests {
             let key: Vec<u32> = (0..len)
                 .map(|_| {
                     let r = rng.next();
-                    if r % 10 == 0 {
+                    if r.is_multiple_of(10) {
                         NONE
                     } else {
                         // The larger of two uniform draws: most keys in the upper half.

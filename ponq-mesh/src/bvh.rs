@@ -344,6 +344,12 @@ impl Bvh {
         }
     }
 
+    /// The items in leaf order: position `k` of [`Bvh::par_fold_overlapping_leaf_pairs`] is
+    /// item `items()[k]`. Items of one leaf, and of nearby leaves, are near in space.
+    pub fn items(&self) -> &[u32] {
+        &self.items
+    }
+
     /// Number of items.
     pub fn len(&self) -> usize {
         self.items.len()
@@ -453,7 +459,9 @@ impl Bvh {
     /// each pair once.
     pub fn for_each_overlapping_pair(&self, mut f: impl FnMut(usize, usize)) {
         if !self.nodes.is_empty() {
-            self.self_seq(0, &mut |i, j| f(i, j));
+            self.self_seq(0, &mut |a, b| {
+                f(self.items[a] as usize, self.items[b] as usize)
+            });
         }
     }
 
@@ -462,6 +470,27 @@ impl Bvh {
     /// partial results are combined with `reduce(left, right)` (always in tree order, so an
     /// order-sensitive `reduce` gives a deterministic result).
     pub fn par_fold_overlapping_pairs<A, I, V, R>(&self, init: I, visit: V, reduce: R) -> A
+    where
+        A: Send,
+        I: Fn() -> A + Sync,
+        V: Fn(&mut A, usize, usize) + Sync,
+        R: Fn(A, A) -> A + Sync,
+    {
+        let items = &self.items;
+        self.par_fold_overlapping_leaf_pairs(
+            init,
+            |acc, a, b| {
+                let (i, j) = (items[a] as usize, items[b] as usize);
+                visit(acc, i.min(j), i.max(j))
+            },
+            reduce,
+        )
+    }
+
+    /// [`Bvh::par_fold_overlapping_pairs`] by leaf-order positions: `visit(&mut acc, a, b)`
+    /// with `a < b` for the items `items()[a]` and `items()[b]`, so that a caller can keep
+    /// the items' data in leaf order ([`Bvh::items`]) and read nearby memory for nearby pairs.
+    pub fn par_fold_overlapping_leaf_pairs<A, I, V, R>(&self, init: I, visit: V, reduce: R) -> A
     where
         A: Send,
         I: Fn() -> A + Sync,
@@ -542,12 +571,13 @@ impl Bvh {
         for a in s..e {
             for b in a + 1..e {
                 if self.boxes[a].overlaps(&self.boxes[b]) {
-                    f(self.items[a] as usize, self.items[b] as usize);
+                    f(a, b);
                 }
             }
         }
     }
 
+    // The pair traversals below report leaf-order positions (see `Bvh::items`).
     fn leaf_cross_pairs(&self, na: &Node, nb: &Node, f: &mut impl FnMut(usize, usize)) {
         for a in na.start as usize..na.end as usize {
             let ba = &self.boxes[a];
@@ -556,7 +586,7 @@ impl Bvh {
             }
             for b in nb.start as usize..nb.end as usize {
                 if ba.overlaps(&self.boxes[b]) {
-                    f(self.items[a] as usize, self.items[b] as usize);
+                    f(a, b);
                 }
             }
         }

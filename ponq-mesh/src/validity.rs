@@ -375,14 +375,63 @@ pub fn count_self_intersections(mesh: &TriMesh) -> usize {
 }
 
 fn count_with(mesh: &TriMesh, prep: &Prepared) -> usize {
-    prep.bvh.par_fold_overlapping_pairs(
+    // The faces as the pair test reads them, in the hierarchy's leaf order: a pair's two
+    // records are near in memory (most pairs are neighbours on the surface), where the faces,
+    // their info and the certificates by vertex would be three scattered reads each.
+    let faces: Vec<LeafFace> = prep
+        .bvh
+        .items()
+        .par_iter()
+        .map(|&f| {
+            let v = mesh.faces[f as usize];
+            let certified = (0..3).fold(0u8, |m, k| m | ((prep.fans[v[k] as usize] as u8) << k));
+            LeafFace {
+                v,
+                face: f,
+                certified,
+                info: prep.info[f as usize],
+            }
+        })
+        .collect();
+    prep.bvh.par_fold_overlapping_leaf_pairs(
         || 0usize,
-        |c, i, j| {
-            if pair_intersects(mesh, prep, i, j) {
+        |c, a, b| {
+            let (x, y) = (&faces[a], &faces[b]);
+            // In face order, as `pair_intersects` takes them.
+            let (x, y) = if x.face < y.face { (x, y) } else { (y, x) };
+            if leaf_pair_intersects(mesh, x, y) {
                 *c += 1;
             }
         },
         |a, b| a + b,
+    )
+}
+
+/// A face as [`count_with`] keeps it: its vertices, its index, which of its vertices have
+/// certified fans (bit `k` for `v[k]`) and its [`face_info`].
+#[derive(Debug, Clone, Copy)]
+struct LeafFace {
+    v: [u32; 3],
+    face: u32,
+    certified: u8,
+    info: u8,
+}
+
+/// [`pair_intersects`] of two faces from their [`LeafFace`]s.
+#[inline]
+fn leaf_pair_intersects(mesh: &TriMesh, x: &LeafFace, y: &LeafFace) -> bool {
+    let shared = (0..3).fold(0u8, |m, k| m | ((y.v.contains(&x.v[k]) as u8) << k));
+    let count = shared.count_ones();
+    if (count == 1 || count == 2) && shared & x.certified != 0 {
+        return false;
+    }
+    pair_rule(
+        x.v,
+        mesh.triangle(x.face as usize),
+        x.info,
+        y.v,
+        mesh.triangle(y.face as usize),
+        y.info,
     )
 }
 

@@ -139,18 +139,36 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
     insphere_bounded(a, b, c, d, e, f64::INFINITY)
 }
 
-/// [`insphere`] with a static error bound tried first: `static_eps` must be at least
-/// `2e-13 * D^5` where `D` bounds every coordinate difference of the five points (see
-/// [`static_insphere_bound`]); `f64::INFINITY` disables it.
+/// The static filter of [`insphere_bounded`] for `L` tets against one point `e` at once, one
+/// tet per lane of `[f64; L]` arrays (the compiler computes the lanes together in vector
+/// registers, SSE2 pairs at least): for lane `l`, `-sign(det)` when `|det| > eps[l]`, else 0
+/// (undecided: [`in_conflict_past_static`] goes on from the lane's determinant, the second
+/// array). The lanes compute [`insphere_bounded`]'s determinant by the same function (Rust
+/// never fuses a multiply and an add, packed or not), so a decided lane is that function's
+/// answer (tested).
 #[inline(always)]
-pub fn insphere_bounded(
-    a: &[f64; 3],
-    b: &[f64; 3],
-    c: &[f64; 3],
-    d: &[f64; 3],
+pub fn insphere_static_lanes<const L: usize>(
+    t: &[[[f64; 3]; 4]; L],
     e: &[f64; 3],
-    static_eps: f64,
-) -> i32 {
+    eps: &[f64; L],
+) -> ([i32; L], [f64; L]) {
+    let mut out = [0i32; L];
+    let mut dets = [0.0f64; L];
+    for l in 0..L {
+        let [a, b, c, d] = &t[l];
+        let det = insphere_det(a, b, c, d, e);
+        let decided = (det > eps[l]) | (det < -eps[l]);
+        out[l] = if decided { -sign(det) } else { 0 };
+        dets[l] = det;
+    }
+    (out, dets)
+}
+
+/// The determinant of [`insphere_bounded`] (negative when `e` is inside the sphere of a
+/// positively oriented `(a, b, c, d)`), in floating point: one function, so that every caller
+/// (the lanes of [`insphere_static_lanes`] too) computes the same bits.
+#[inline(always)]
+fn insphere_det(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> f64 {
     let (ax, ay, az) = (a[0] - e[0], a[1] - e[1], a[2] - e[2]);
     let (bx, by, bz) = (b[0] - e[0], b[1] - e[1], b[2] - e[2]);
     let (cx, cy, cz) = (c[0] - e[0], c[1] - e[1], c[2] - e[2]);
@@ -172,12 +190,46 @@ pub fn insphere_bounded(
     let bcd = bz * cd - cz * bd + dz * bc;
     // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
     // negative when e is inside the sphere of a positively oriented (a, b, c, d).
-    let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
+    (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd)
+}
+
+/// [`insphere`] with a static error bound tried first: `static_eps` must be at least
+/// `2e-13 * D^5` where `D` bounds every coordinate difference of the five points (see
+/// [`static_insphere_bound`]); `f64::INFINITY` disables it.
+#[inline(always)]
+pub fn insphere_bounded(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+    e: &[f64; 3],
+    static_eps: f64,
+) -> i32 {
+    let det = insphere_det(a, b, c, d, e);
     // As in `orient3d_bounded`: the sign as a value (inside and outside are about equally
     // frequent in a cavity search, so a branch on it would be mispredicted half the time).
     if (det > static_eps) | (det < -static_eps) {
         return -sign(det);
     }
+    insphere_past_static(a, b, c, d, e, det)
+}
+
+/// The rest of [`insphere_bounded`] once its static bound has not decided: `det` must be the
+/// determinant that function computes (bit for bit, as [`insphere_static_lanes`] gives it).
+/// The semi-static bound from the actual coordinate differences, then the exact sign.
+#[inline]
+pub fn insphere_past_static(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+    e: &[f64; 3],
+    det: f64,
+) -> i32 {
+    let (ax, ay, az) = (a[0] - e[0], a[1] - e[1], a[2] - e[2]);
+    let (bx, by, bz) = (b[0] - e[0], b[1] - e[1], b[2] - e[2]);
+    let (cx, cy, cz) = (c[0] - e[0], c[1] - e[1], c[2] - e[2]);
+    let (dx, dy, dz) = (d[0] - e[0], d[1] - e[1], d[2] - e[2]);
     let mx = fmax(fmax(ax.abs(), bx.abs()), fmax(cx.abs(), dx.abs()));
     let my = fmax(fmax(ay.abs(), by.abs()), fmax(cy.abs(), dy.abs()));
     let mz = fmax(fmax(az.abs(), bz.abs()), fmax(cz.abs(), dz.abs()));
@@ -326,6 +378,23 @@ pub fn in_conflict_bounded(
     static_eps: f64,
 ) -> bool {
     let s = insphere_bounded(t[0], t[1], t[2], t[3], e, static_eps);
+    if s != 0 {
+        return s > 0;
+    }
+    let (it, ie) = ids();
+    perturbed_insphere_tie(t, it, e, ie)
+}
+
+/// [`in_conflict_bounded`] once its static bound has not decided, from the determinant
+/// [`insphere_static_lanes`] computed (see [`insphere_past_static`]).
+#[inline]
+pub fn in_conflict_past_static(
+    t: [&[f64; 3]; 4],
+    ids: impl FnOnce() -> ([u32; 4], u32),
+    e: &[f64; 3],
+    det: f64,
+) -> bool {
+    let s = insphere_past_static(t[0], t[1], t[2], t[3], e, det);
     if s != 0 {
         return s > 0;
     }
@@ -677,16 +746,18 @@ mod tests {
         assert!(in_conflict([&O, &X, &Y, &Z], [0, 1, 2, 9], &p, 4));
     }
 
-    #[test]
-    fn filters_agree_with_the_exact_predicates() {
+    /// Five-point sets on which the filters are hard: random, co-spherical and coplanar up
+    /// to rounding, nearly coincident, on a lattice (exact ties), and far from the origin
+    /// (tiny differences), with every coordinate difference at most 2.
+    fn hard_cases(n: usize) -> impl Iterator<Item = [[f64; 3]; 5]> {
         let mut seed = 7u64;
-        let mut r = || {
+        let mut r = move || {
             seed ^= seed << 13;
             seed ^= seed >> 7;
             seed ^= seed << 17;
             (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
-        for i in 0..60000 {
+        (0..n).map(move |i| {
             let mut p: [[f64; 3]; 5] = std::array::from_fn(|_| [r(), r(), r()]);
             if i % 6 == 4 {
                 // On a sphere up to rounding: the insphere determinant is a few ulps of its
@@ -721,6 +792,71 @@ mod tests {
                     *q = q.map(|x| x * 1e-30 + 1.0);
                 }
             }
+            p
+        })
+    }
+
+    /// The lanes of [`insphere_static_lanes`] (8 and 4) against the one-test functions on the
+    /// hard cases, each translated so that its fifth point is the group's common one: the same
+    /// determinant bits as [`insphere_det`], a decided lane has the exact sign, and an
+    /// undecided one (ties, and lanes without a static bound) continues to the exact sign and
+    /// to [`in_conflict_bounded`]'s answer.
+    #[test]
+    fn lanes_agree_with_the_one_test_filter() {
+        use std::array::from_fn;
+        let cases: Vec<[[f64; 3]; 5]> = hard_cases(24000).collect();
+        let (mut decided, mut undecided) = (0, 0);
+        for (g, group) in cases.chunks_exact(8).enumerate() {
+            let e = group[0][4];
+            let t: [[[f64; 3]; 4]; 8] =
+                from_fn(|l| from_fn(|i| from_fn(|k| group[l][i][k] - group[l][4][k] + e[k])));
+            // Coordinate differences stay below 2 plus roundings.
+            let eps: [f64; 8] = from_fn(|l| {
+                if (g + l) % 5 == 0 {
+                    f64::INFINITY
+                } else {
+                    static_insphere_bound(4.0)
+                }
+            });
+            let (s8, d8) = insphere_static_lanes(&t, &e, &eps);
+            let (s4, d4) = insphere_static_lanes::<4>(&from_fn(|l| t[l]), &e, &from_fn(|l| eps[l]));
+            for l in 0..8 {
+                let [a, b, c, d] = &t[l];
+                let det = insphere_det(a, b, c, d, &e);
+                assert_eq!(d8[l].to_bits(), det.to_bits());
+                if l < 4 {
+                    assert_eq!((s4[l], d4[l].to_bits()), (s8[l], det.to_bits()));
+                }
+                let exact = robust_insphere([*a, *b, *c, *d, e]);
+                // Decided exactly where the static bound decides `insphere_bounded`.
+                assert_eq!(s8[l] != 0, det.abs() > eps[l]);
+                if s8[l] != 0 {
+                    decided += 1;
+                    assert_eq!(s8[l], exact);
+                    continue;
+                }
+                undecided += 1;
+                assert_eq!(insphere_past_static(a, b, c, d, &e, det), exact);
+                let pts = [a, b, c, d, &e];
+                let distinct = (0..5).all(|i| (0..i).all(|j| pts[i] != pts[j]));
+                if distinct && orient3d(a, b, c, d) > 0 {
+                    let ids = || ([0, 1, 2, 3], 4);
+                    assert_eq!(
+                        in_conflict_past_static([a, b, c, d], ids, &e, det),
+                        in_conflict_bounded([a, b, c, d], ids, &e, eps[l])
+                    );
+                }
+            }
+        }
+        assert!(
+            decided > 5_000 && undecided > 5_000,
+            "{decided} / {undecided}"
+        );
+    }
+
+    #[test]
+    fn filters_agree_with_the_exact_predicates() {
+        for p in hard_cases(60000) {
             assert_eq!(
                 orient3d(&p[0], &p[1], &p[2], &p[3]),
                 orient3d_exact(&p[0], &p[1], &p[2], &p[3])

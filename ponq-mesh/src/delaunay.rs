@@ -144,6 +144,9 @@ pub struct DelaunayOptions {
     /// Testing aid: make every `n`-th lock attempt of the parallel phase fail as if another
     /// worker held the tet, so that the back-off path runs (0: never).
     pub fail_every_nth_lock: u32,
+    /// Testing aid: insert with the portable code even where the CPU has AVX2 (the same
+    /// source compiled without it; the result is the same).
+    pub portable: bool,
     /// Points within this (Euclidean) distance of the first point of their run in the
     /// sorted order (by Hilbert cell, then position) become one vertex, as exact duplicates
     /// do (0: exact duplicates only, the default). Best effort: points a rounding apart are
@@ -157,8 +160,23 @@ impl Default for DelaunayOptions {
         Self {
             threads: rayon::current_num_threads(),
             fail_every_nth_lock: 0,
+            portable: false,
             merge_within: 0.0,
         }
+    }
+}
+
+/// Whether the insertion runs [`Worker::insert_avx2`]: on x86-64 CPUs with AVX2, unless
+/// `opts.portable`.
+fn avx2_insertion(opts: &DelaunayOptions) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        !opts.portable && std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = opts;
+        false
     }
 }
 
@@ -868,6 +886,9 @@ struct Worker {
     large_cavities: usize,
     /// Testing aid: every `n`-th lock attempt fails (0: never).
     fail_every: u32,
+    /// Insert with [`Worker::insert_avx2`] (only set where the CPU has AVX2).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    avx2: bool,
     lock_attempts: u32,
     rng: SplitMix,
     /// Cavity tets still to look around, each with the face it was entered through.
@@ -907,6 +928,7 @@ impl Worker {
             backed_off: 0,
             large_cavities: 0,
             fail_every: 0,
+            avx2: false,
             lock_attempts: 0,
             rng: SplitMix(seed),
             stack: Vec::new(),
@@ -1203,8 +1225,8 @@ impl Worker {
     fn insert<const PAR: bool>(&mut self, sh: &Shared, v: u32) -> std::result::Result<(), Fail> {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked just above).
+            if self.avx2 {
+                // SAFETY: the CPU has AVX2 (`avx2` is only set when it does).
                 return unsafe { self.insert_avx2::<PAR>(sh, v) };
             }
         }
@@ -1721,6 +1743,7 @@ impl Builder {
     fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> (Delaunay, bool) {
         let n = self.n_real as usize;
         let mut main = Worker::new(1, 12345);
+        main.avx2 = avx2_insertion(opts);
         let threads = opts.threads.clamp(1, 64);
         if threads == 1 || n < PARALLEL_MIN_POINTS {
             self.insert_sequential(&mut main, 0..self.n_real);
@@ -1775,6 +1798,7 @@ impl Builder {
             .collect();
         for (w, queue) in workers.iter_mut().zip(&queues) {
             w.fail_every = opts.fail_every_nth_lock;
+            w.avx2 = main.avx2;
             // Start each worker in its own region: at the tet holding its first vertex.
             w.last = main.last;
             if let Some(&(c, d, rev)) = queue.first() {

@@ -739,3 +739,41 @@ mod hull_fuzz {
         }
     }
 }
+
+/// The portable insertion (the same code compiled without AVX2, forced by the testing option)
+/// gives the same arrays as the default one (AVX2 where the CPU has it), on one thread and
+/// two, on random points, a lattice (every conflict test a tie) and grid-snapped points
+/// inside a cube (ties and tets of the super-tetrahedron).
+#[test]
+fn portable_and_avx2_insertions_give_the_same_triangulation() {
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let random: Vec<[f64; 3]> = (0..12_000)
+        .map(|_| [rng.random(), rng.random(), rng.random()])
+        .collect();
+    let mut snapped = cube_corners();
+    snapped
+        .extend((0..9_000).map(|_| [0, 1, 2].map(|_| rng.random_range(-12i32..=12) as f64 / 12.0)));
+    for (name, pts) in [
+        ("random", random),
+        ("lattice", lattice(22, 0.1)),
+        ("snapped", snapped),
+    ] {
+        for threads in [1, 2] {
+            let run = |portable: bool| {
+                let opts = DelaunayOptions {
+                    threads,
+                    portable,
+                    ..Default::default()
+                };
+                Delaunay::with_options(&pts, &opts).unwrap()
+            };
+            let (fast, portable) = (run(false), run(true));
+            assert!(fast.tets.len() > 10_000, "{name}");
+            assert_eq!(fast.tets, portable.tets, "{name}, {threads} threads");
+            assert_eq!(
+                fast.neighbors, portable.neighbors,
+                "{name}, {threads} threads"
+            );
+        }
+    }
+}

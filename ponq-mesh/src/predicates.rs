@@ -427,6 +427,21 @@ fn perturbed_insphere_tie(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32
 /// Circumcentre of a tetrahedron (floating point; used for tagging, not for topology).
 /// Returns `None` for a flat tetrahedron.
 pub fn circumcenter(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> Option<[f64; 3]> {
+    let (r, det) = circumcenter_unchecked(a, b, c, d);
+    (det != 0.0 && det.is_finite() && r.iter().all(|x| x.is_finite())).then_some(r)
+}
+
+/// [`circumcenter`]'s arithmetic without its checks: the centre and the determinant it
+/// divides by (the centre is meaningful only when [`circumcenter`] returns it: a non-zero,
+/// finite determinant and finite coordinates). One function, so that the tagging's lanes
+/// (`tagging::tag_lanes`) compute the same bits.
+#[inline(always)]
+pub fn circumcenter_unchecked(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+) -> ([f64; 3], f64) {
     let sub = |p: &[f64; 3]| [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
     let (u, v, w) = (sub(b), sub(c), sub(d));
     let dot = |p: [f64; 3]| p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
@@ -441,9 +456,6 @@ pub fn circumcenter(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> O
     let wu = cross(w, u);
     let uv = cross(u, v);
     let det = u[0] * vw[0] + u[1] * vw[1] + u[2] * vw[2];
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
     let (lu, lv, lw) = (dot(u), dot(v), dot(w));
     let s = 0.5 / det;
     let r = [
@@ -451,7 +463,7 @@ pub fn circumcenter(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> O
         a[1] + s * (lu * vw[1] + lv * wu[1] + lw * uv[1]),
         a[2] + s * (lu * vw[2] + lv * wu[2] + lw * uv[2]),
     ];
-    r.iter().all(|x| x.is_finite()).then_some(r)
+    (r, det)
 }
 
 /// The exact insphere determinant in fixed-width integer arithmetic.

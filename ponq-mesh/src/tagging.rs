@@ -10,7 +10,7 @@
 //! [`SmallTetRule::Authors`] is the authors' code to the letter (smallest of all tets).
 
 use crate::complex::{Label, TetComplex};
-use crate::predicates::circumcenter;
+use crate::predicates::{circumcenter, circumcenter_unchecked};
 
 #[inline]
 fn dot_diff(a: &[f64; 3], b: &[f64; 3], n: &[f64; 3]) -> f64 {
@@ -136,27 +136,7 @@ fn tag_lanes<const L: usize>(cx: &TetComplex, t0: u32) -> [Label; L] {
     for l in 0..L {
         let q = |i: usize| [p[i][0][l], p[i][1][l], p[i][2][l]];
         let n = |i: usize| [nr[i][0][l], nr[i][1][l], nr[i][2][l]];
-        // `circumcenter`'s operations.
-        let a = q(0);
-        let sub = |x: [f64; 3]| [x[0] - a[0], x[1] - a[1], x[2] - a[2]];
-        let (u, v, w) = (sub(q(1)), sub(q(2)), sub(q(3)));
-        let dot = |x: [f64; 3]| x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
-        let cross = |x: [f64; 3], y: [f64; 3]| {
-            [
-                x[1] * y[2] - x[2] * y[1],
-                x[2] * y[0] - x[0] * y[2],
-                x[0] * y[1] - x[1] * y[0],
-            ]
-        };
-        let (vw, wu, uv) = (cross(v, w), cross(w, u), cross(u, v));
-        let det = u[0] * vw[0] + u[1] * vw[1] + u[2] * vw[2];
-        let (lu, lv, lw) = (dot(u), dot(v), dot(w));
-        let s = 0.5 / det;
-        let cc = [
-            a[0] + s * (lu * vw[0] + lv * wu[0] + lw * uv[0]),
-            a[1] + s * (lu * vw[1] + lv * wu[1] + lw * uv[1]),
-            a[2] + s * (lu * vw[2] + lv * wu[2] + lw * uv[2]),
-        ];
+        let (cc, det) = circumcenter_unchecked(&q(0), &q(1), &q(2), &q(3));
         finite[l] = det != 0.0
             && det.is_finite()
             && cc[0].is_finite()

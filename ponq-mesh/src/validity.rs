@@ -375,6 +375,37 @@ pub fn count_self_intersections(mesh: &TriMesh) -> usize {
 }
 
 fn count_with(mesh: &TriMesh, prep: &Prepared) -> usize {
+    fold_intersecting(mesh, prep, || 0usize, |c, _, _| *c += 1, |a, b| a + b)
+}
+
+/// All intersecting face pairs `(i, j)`, `i < j`, sorted.
+pub fn intersecting_face_pairs(mesh: &TriMesh) -> Vec<(usize, usize)> {
+    let Some(prep) = prepare(mesh, None) else {
+        return Vec::new();
+    };
+    let mut v = fold_intersecting(
+        mesh,
+        &prep,
+        Vec::new,
+        |v: &mut Vec<(usize, usize)>, i, j| v.push((i, j)),
+        |mut a, mut b| {
+            a.append(&mut b);
+            a
+        },
+    );
+    v.sort_unstable();
+    v
+}
+
+/// Parallel fold over the intersecting face pairs `(i, j)`, `i < j` (each once, in no
+/// particular order), as [`Bvh::par_fold_overlapping_pairs`] folds its pairs.
+fn fold_intersecting<A: Send>(
+    mesh: &TriMesh,
+    prep: &Prepared,
+    init: impl Fn() -> A + Sync,
+    visit: impl Fn(&mut A, usize, usize) + Sync,
+    reduce: impl Fn(A, A) -> A + Sync,
+) -> A {
     // The faces as the pair test reads them, in the hierarchy's leaf order: a pair's two
     // records are near in memory (most pairs are neighbours on the surface), where the faces,
     // their info and the certificates by vertex would be three scattered reads each.
@@ -394,21 +425,21 @@ fn count_with(mesh: &TriMesh, prep: &Prepared) -> usize {
         })
         .collect();
     prep.bvh.par_fold_overlapping_leaf_pairs(
-        || 0usize,
-        |c, a, b| {
+        init,
+        |acc, a, b| {
             let (x, y) = (&faces[a], &faces[b]);
-            // In face order, as `pair_intersects` takes them.
+            // In face order.
             let (x, y) = if x.face < y.face { (x, y) } else { (y, x) };
-            if leaf_pair_intersects(mesh, x, y) {
-                *c += 1;
+            if pair_intersects(mesh, x, y) {
+                visit(acc, x.face as usize, y.face as usize);
             }
         },
-        |a, b| a + b,
+        reduce,
     )
 }
 
-/// A face as [`count_with`] keeps it: its vertices, its index, which of its vertices have
-/// certified fans (bit `k` for `v[k]`) and its [`face_info`].
+/// A face as [`fold_intersecting`] keeps it: its vertices, its index, which of its vertices
+/// have certified fans (bit `k` for `v[k]`) and its [`face_info`].
 #[derive(Debug, Clone, Copy)]
 struct LeafFace {
     v: [u32; 3],
@@ -417,9 +448,12 @@ struct LeafFace {
     info: u8,
 }
 
-/// [`pair_intersects`] of two faces from their [`LeafFace`]s.
+/// Whether two faces intersect beyond what they share. One or two shared vertex indices, one
+/// of them with a certified fan: the faces meet only at the shared vertex or edge
+/// (`crate::fan`). Three shared indices (a repeated face) never come with a certified fan, but
+/// are left to the rule all the same. Otherwise [`pair_rule`].
 #[inline]
-fn leaf_pair_intersects(mesh: &TriMesh, x: &LeafFace, y: &LeafFace) -> bool {
+fn pair_intersects(mesh: &TriMesh, x: &LeafFace, y: &LeafFace) -> bool {
     let shared = (0..3).fold(0u8, |m, k| m | ((y.v.contains(&x.v[k]) as u8) << k));
     let count = shared.count_ones();
     if (count == 1 || count == 2) && shared & x.certified != 0 {
@@ -433,27 +467,6 @@ fn leaf_pair_intersects(mesh: &TriMesh, x: &LeafFace, y: &LeafFace) -> bool {
         mesh.triangle(y.face as usize),
         y.info,
     )
-}
-
-/// All intersecting face pairs `(i, j)`, `i < j`, sorted.
-pub fn intersecting_face_pairs(mesh: &TriMesh) -> Vec<(usize, usize)> {
-    let Some(prep) = prepare(mesh, None) else {
-        return Vec::new();
-    };
-    let mut v = prep.bvh.par_fold_overlapping_pairs(
-        Vec::new,
-        |v: &mut Vec<(usize, usize)>, i, j| {
-            if pair_intersects(mesh, &prep, i, j) {
-                v.push((i, j));
-            }
-        },
-        |mut a, mut b| {
-            a.append(&mut b);
-            a
-        },
-    );
-    v.sort_unstable();
-    v
 }
 
 /// The intersecting face pairs `(i, j)`, `i < j`, sorted, that involve at least one face of
@@ -594,25 +607,6 @@ fn prepare(mesh: &TriMesh, fans: Option<Vec<bool>>) -> Option<Prepared> {
         || fans.unwrap_or_else(|| graph_fans(&mesh.vertices, &mesh.faces)),
     );
     Some(Prepared { bvh, info, fans })
-}
-
-fn pair_intersects(mesh: &TriMesh, prep: &Prepared, i: usize, j: usize) -> bool {
-    let (fi, fj) = (mesh.faces[i], mesh.faces[j]);
-    // One or two shared vertex indices, one of them with a certified fan: the faces meet
-    // only at the shared vertex or edge (`crate::fan`). Three shared indices (a repeated
-    // face) never come with a certified fan, but are left to the rule all the same.
-    let shared = fi.iter().filter(|v| fj.contains(v)).count();
-    if (shared == 1 || shared == 2) && fi.iter().any(|v| fj.contains(v) && prep.fans[*v as usize]) {
-        return false;
-    }
-    pair_rule(
-        fi,
-        mesh.triangle(i),
-        prep.info[i],
-        fj,
-        mesh.triangle(j),
-        prep.info[j],
-    )
 }
 
 /// The face-pair rules of the module docs.

@@ -54,6 +54,19 @@ pub struct TetComplex {
     pub h: f64,
 }
 
+/// Barycentre of the four points, summed in their order (one function, so that the tagging's
+/// lanes compute [`TetComplex::barycenter`]'s bits).
+#[inline(always)]
+pub fn barycenter_of(p: [[f64; 3]; 4]) -> [f64; 3] {
+    let mut b = [0.0; 3];
+    for q in p {
+        for k in 0..3 {
+            b[k] += 0.25 * q[k];
+        }
+    }
+    b
+}
+
 impl TetComplex {
     /// Stores the per-vertex data and one tet per vertex. Full incidence lists are not built:
     /// the mesher needs the star of a few hundred vertices at most (the small-tet rule, the
@@ -135,15 +148,7 @@ impl TetComplex {
 
     /// Barycentre of tet `t`.
     pub fn barycenter(&self, t: u32) -> [f64; 3] {
-        let tv = self.dt.tets[t as usize];
-        let mut b = [0.0; 3];
-        for &v in &tv {
-            let p = self.pos(v);
-            for k in 0..3 {
-                b[k] += 0.25 * p[k];
-            }
-        }
-        b
+        barycenter_of(self.dt.tets[t as usize].map(|v| *self.pos(v)))
     }
 
     /// Volume of tet `t` (positive).

@@ -428,12 +428,18 @@ fn perturbed_insphere_tie(t: [&[f64; 3]; 4], it: [u32; 4], e: &[f64; 3], ie: u32
 /// Returns `None` for a flat tetrahedron.
 pub fn circumcenter(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> Option<[f64; 3]> {
     let (r, det) = circumcenter_unchecked(a, b, c, d);
-    (det != 0.0 && det.is_finite() && r.iter().all(|x| x.is_finite())).then_some(r)
+    circumcenter_found(&r, det).then_some(r)
+}
+
+/// Whether [`circumcenter_unchecked`]'s `(r, det)` is a circumcentre (what [`circumcenter`]
+/// returns): a non-zero, finite determinant and finite coordinates.
+#[inline(always)]
+pub fn circumcenter_found(r: &[f64; 3], det: f64) -> bool {
+    det != 0.0 && det.is_finite() && r.iter().all(|x| x.is_finite())
 }
 
 /// [`circumcenter`]'s arithmetic without its checks: the centre and the determinant it
-/// divides by (the centre is meaningful only when [`circumcenter`] returns it: a non-zero,
-/// finite determinant and finite coordinates). One function, so that the tagging's lanes
+/// divides by (the centre is meaningful only when [`circumcenter_found`]). One function, so that the tagging's lanes
 /// (`tagging::tag_lanes`) compute the same bits.
 #[inline(always)]
 pub fn circumcenter_unchecked(

@@ -9,8 +9,8 @@
 //! [`SmallTetRule::BothWays`] (the paper's text) a vertex without an outside tet gets one too;
 //! [`SmallTetRule::Authors`] is the authors' code to the letter (smallest of all tets).
 
-use crate::complex::{Label, TetComplex};
-use crate::predicates::{circumcenter, circumcenter_unchecked};
+use crate::complex::{Label, TetComplex, barycenter_of};
+use crate::predicates::{circumcenter, circumcenter_found, circumcenter_unchecked};
 
 #[inline]
 fn dot_diff(a: &[f64; 3], b: &[f64; 3], n: &[f64; 3]) -> f64 {
@@ -31,24 +31,32 @@ pub fn tag_tet(cx: &TetComplex, t: u32) -> Label {
         .iter()
         .filter(|&&v| dot_diff(cx.pos(v), &cc, &cx.tag_normals[v as usize]) > 0.0)
         .count();
-    let label = match count {
-        4 => Label::Inside,
-        0 => Label::Outside,
-        _ => return Label::Unknown,
-    };
+    if count != 0 && count != 4 {
+        return Label::Unknown;
+    }
     let b = cx.barycenter(t);
-    // The barycentre test weighs each plane by the length of the vertex's raw normal, as the
-    // authors' mesher does (SPEC: `mean_i (bary - v_i) . n_i` on the raw normals): a short
-    // normal (its points' normals disagree: a crease, a corner) counts less.
     let bary: f64 = tv
         .iter()
         .map(|&v| dot_diff(&b, cx.pos(v), &cx.tag_normals[v as usize]))
         .sum::<f64>()
         / 4.0;
-    match label {
-        Label::Outside if bary < 0.0 => Label::Unknown,
-        Label::Inside if bary > 0.0 => Label::Unknown,
-        l => l,
+    label_of(count, bary)
+}
+
+/// The label of a tet (no protective vertex, a circumcentre) whose four vertices see the
+/// circumcentre in front of their planes `count` times, and whose barycentre has the mean
+/// signed distance `bary` to them: inside for 4, outside for 0, unless the barycentre says the
+/// other side; otherwise unknown. The barycentre test weighs each plane by the length of the
+/// vertex's raw normal, as the authors' mesher does (SPEC: `mean_i (bary - v_i) . n_i` on the
+/// raw normals): a short normal (its points' normals disagree: a crease, a corner) counts less.
+#[inline(always)]
+fn label_of(count: usize, bary: f64) -> Label {
+    match count {
+        4 if bary > 0.0 => Label::Unknown,
+        4 => Label::Inside,
+        0 if bary < 0.0 => Label::Unknown,
+        0 => Label::Outside,
+        _ => Label::Unknown,
     }
 }
 
@@ -137,11 +145,7 @@ fn tag_lanes<const L: usize>(cx: &TetComplex, t0: u32) -> [Label; L] {
         let q = |i: usize| [p[i][0][l], p[i][1][l], p[i][2][l]];
         let n = |i: usize| [nr[i][0][l], nr[i][1][l], nr[i][2][l]];
         let (cc, det) = circumcenter_unchecked(&q(0), &q(1), &q(2), &q(3));
-        finite[l] = det != 0.0
-            && det.is_finite()
-            && cc[0].is_finite()
-            && cc[1].is_finite()
-            && cc[2].is_finite();
+        finite[l] = circumcenter_found(&cc, det);
         // The four plane tests (`dot_diff(p_i, cc, n_i) > 0`), the barycentre (the sum in
         // `TetComplex::barycenter`'s order) and its mean distance.
         let mut c = 0u8;
@@ -149,12 +153,7 @@ fn tag_lanes<const L: usize>(cx: &TetComplex, t0: u32) -> [Label; L] {
             c += (dot_diff(&q(i), &cc, &n(i)) > 0.0) as u8;
         }
         count[l] = c;
-        let mut b = [0.0f64; 3];
-        for i in 0..4 {
-            for k in 0..3 {
-                b[k] += 0.25 * q(i)[k];
-            }
-        }
+        let b = barycenter_of([q(0), q(1), q(2), q(3)]);
         let mut sum = 0.0f64;
         for i in 0..4 {
             sum += dot_diff(&b, &q(i), &n(i));
@@ -168,13 +167,7 @@ fn tag_lanes<const L: usize>(cx: &TetComplex, t0: u32) -> [Label; L] {
         } else if !finite[l] {
             Label::Unknown
         } else {
-            match count[l] {
-                4 if bary[l] > 0.0 => Label::Unknown,
-                4 => Label::Inside,
-                0 if bary[l] < 0.0 => Label::Unknown,
-                0 => Label::Outside,
-                _ => Label::Unknown,
-            }
+            label_of(count[l] as usize, bary[l])
         };
     }
     out

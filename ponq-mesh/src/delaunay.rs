@@ -742,15 +742,18 @@ const FACE_EDGES: [(usize, usize, usize); 3] = [(0, 1, 2), (1, 2, 0), (2, 0, 1)]
 /// [`Worker::link_small`] (a Delaunay cavity in 3D has about 16 on average).
 const SMALL_CAVITY: usize = 32;
 
-/// What the cavity search does with a neighbour of a cavity tet: none there (the hull), a
-/// tet already in the cavity, one known not to be, or one to test.
-const NEIGHBOUR_NONE: u8 = 0;
-/// See [`NEIGHBOUR_NONE`].
-const NEIGHBOUR_SKIP: u8 = 1;
-/// See [`NEIGHBOUR_NONE`].
-const NEIGHBOUR_KNOWN: u8 = 2;
-/// See [`NEIGHBOUR_NONE`].
-const NEIGHBOUR_TEST: u8 = 3;
+/// What the cavity search does with a neighbour of a cavity tet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Neighbour {
+    /// None there (the hull of the super-tetrahedron): a boundary face.
+    Hull,
+    /// Already in the cavity.
+    InCavity,
+    /// Known not to be in conflict (tested from another cavity tet).
+    Known,
+    /// To test against the new point.
+    Test,
+}
 
 /// A slot of a worker's directed-edge table (see [`Worker::link_hashed`]).
 #[derive(Debug, Clone, Copy, Default)]
@@ -1279,14 +1282,14 @@ impl Worker {
             let (first, count) = if entry == 4 { (0, 4) } else { (entry + 1, 3) };
             // First the neighbours' locks and marks; the conflict tests of the neighbours
             // that need one then run together ([`insphere_static_lanes`]).
-            let mut todo = [(NONE, 0u8, NEIGHBOUR_SKIP); 4];
+            let mut todo = [(NONE, 0u8, Neighbour::InCavity); 4];
             let mut pts = [[[0.0f64; 3]; 4]; 4];
             let mut eps = [f64::INFINITY; 4];
             for r in 0..count {
                 let k = (first + r) & 3;
                 let nb = cn[k as usize];
                 let state = if nb == NONE {
-                    NEIGHBOUR_NONE
+                    Neighbour::Hull
                 } else {
                     if PAR {
                         if !self.try_lock::<PAR>(sh, nb) {
@@ -1299,9 +1302,9 @@ impl Worker {
                     }
                     let mark = sh.tets[nb as usize].mark();
                     if mark == in_cav {
-                        NEIGHBOUR_SKIP
+                        Neighbour::InCavity
                     } else if mark == not_cav {
-                        NEIGHBOUR_KNOWN
+                        Neighbour::Known
                     } else {
                         let tv = sh.tets[nb as usize].verts();
                         for q in 0..4 {
@@ -1310,7 +1313,7 @@ impl Worker {
                         if sh.real(tv) {
                             eps[r as usize] = sh.static_eps;
                         }
-                        NEIGHBOUR_TEST
+                        Neighbour::Test
                     }
                 };
                 todo[r as usize] = (nb, k, state);
@@ -1318,15 +1321,15 @@ impl Worker {
             let (signs, dets) = insphere_static_lanes(&pts, sh.p(v), &eps);
             for r in 0..count as usize {
                 let (nb, k, state) = todo[r];
-                if state == NEIGHBOUR_NONE {
+                if state == Neighbour::Hull {
                     self.boundary.push((c, k, NONE, 0));
                     continue;
                 }
-                if state == NEIGHBOUR_SKIP {
+                if state == Neighbour::InCavity {
                     continue;
                 }
                 let nt = &sh.tets[nb as usize];
-                let conflict = state == NEIGHBOUR_TEST
+                let conflict = state == Neighbour::Test
                     && if signs[r] != 0 {
                         signs[r] > 0
                     } else {

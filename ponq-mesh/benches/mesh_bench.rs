@@ -61,7 +61,8 @@ the time of each meshing stage (best of N after a warm-up run) and of the validi
 
 usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N] [--save DIR] [FILE.npz ...]
 
-  --grid G      only this synthetic grid (repeatable)
+  --grid G      only this synthetic grid (repeatable); another grid than the four (16 to
+                1024) gets about 47 G^2 surface samples, like grid 230 (221: ~100k points)
   --repeat N    best of N runs (default 3): a long run for a profiler
   --save DIR    also write each synthetic PoNQ as DIR/synthetic_G.npz (for another build's
                 ponq-mesh: benches/mesh_side_by_side.sh)
@@ -90,15 +91,30 @@ fn main() {
         "| input | points | tets | prepare ms | delaunay ms | tagging ms | cut ms | manifold ms | extraction ms | flips ms | total ms | V / F | valid | check ms |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
-    for (grid, samples) in [
-        (32usize, 80_000usize),
+    const STANDARD: [(usize, usize); 4] = [
+        (32, 80_000),
         (72, 300_000),
         (145, 1_000_000),
         (230, 2_500_000),
-    ] {
-        if !only.is_empty() && !only.contains(&grid) {
-            continue;
-        }
+    ];
+    let grids: Vec<(usize, usize)> = if only.is_empty() {
+        STANDARD.to_vec()
+    } else {
+        only.iter()
+            .map(|&g| {
+                assert!(
+                    (16..=1024).contains(&g),
+                    "--grid {g}: give a grid from 16 to 1024"
+                );
+                let samples = STANDARD
+                    .iter()
+                    .find(|s| s.0 == g)
+                    .map_or(2_500_000 * g * g / (230 * 230), |s| s.1);
+                (g, samples)
+            })
+            .collect()
+    };
+    for (grid, samples) in grids {
         let ponq = ponq_by_grid(&cad_union_samples(samples), grid);
         if let Some(dir) = &save {
             let path = dir.join(format!("synthetic_{grid}.npz"));

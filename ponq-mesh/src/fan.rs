@@ -119,38 +119,59 @@ pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> 
     }
 }
 
+/// A corner of a vertex `v` as the directed edge `(r, r')` of `v`'s link it holds (its face
+/// is `(v, r, r')`).
+pub(crate) trait Link {
+    fn link(&self) -> (u32, u32);
+}
+
+impl Link for (u32, u32) {
+    #[inline(always)]
+    fn link(&self) -> (u32, u32) {
+        *self
+    }
+}
+
 /// Whether the directed edges `(r, r')` (the corners of a vertex: faces `(v, r, r')`) form
 /// one simple cycle: from the first, each edge's `r'` starts exactly one edge, and following
 /// them comes back to the first after visiting all. (Each edge is then the only one starting
 /// at its `r`, so the `r` are distinct, and so are the `r'`.) `false` for no edge.
-pub(crate) fn one_cycle(corners: &[(u32, u32)]) -> bool {
+pub(crate) fn one_cycle<C: Link>(corners: &[C]) -> bool {
+    one_cycle_steps(corners, |_, _| {})
+}
+
+/// [`one_cycle`], calling `step(i, j)` for each corner `i` followed and its successor `j`
+/// (corner `j`'s `r` is corner `i`'s `r'`). When the answer is `true`, every corner was `i`
+/// once and `j` once (so `j`'s predecessor is known for every `j`).
+pub(crate) fn one_cycle_steps<C: Link>(corners: &[C], step: impl FnMut(usize, usize)) -> bool {
     let n = corners.len();
     if n == 0 {
         return false;
     }
     if n > SMALL_DEGREE {
-        one_cycle_sorted(corners)
+        one_cycle_sorted(corners, step)
     } else {
-        one_cycle_quadratic(corners)
+        one_cycle_quadratic(corners, step)
     }
 }
 
 /// [`one_cycle`] for a few corners: at each step a search of all of them, without early exit
 /// (branch-free).
-fn one_cycle_quadratic(corners: &[(u32, u32)]) -> bool {
+fn one_cycle_quadratic<C: Link>(corners: &[C], mut step_to: impl FnMut(usize, usize)) -> bool {
     let n = corners.len();
     let mut cur = 0usize;
     for step in 0..n {
-        let next = corners[cur].1;
+        let next = corners[cur].link().1;
         let (mut found, mut count) = (0usize, 0u32);
         for (j, c) in corners.iter().enumerate() {
-            let hit = c.0 == next;
+            let hit = c.link().0 == next;
             found = if hit { j } else { found };
             count += hit as u32;
         }
         if count != 1 {
             return false;
         }
+        step_to(cur, found);
         cur = found;
         if cur == 0 {
             // Back at the start: all corners visited iff this took n steps (a corner seen
@@ -167,25 +188,37 @@ const SMALL_DEGREE: usize = 32;
 
 /// [`one_cycle`] in `O(n log n)`: the corners sorted by first vertex (a repeated one fails),
 /// then the successors found by binary search.
-fn one_cycle_sorted(corners: &[(u32, u32)]) -> bool {
+fn one_cycle_sorted<C: Link>(corners: &[C], mut step_to: impl FnMut(usize, usize)) -> bool {
     let n = corners.len();
-    let mut e = corners.to_vec();
+    // (r, r', index), sorted by r.
+    let mut e: Vec<(u32, u32, usize)> = corners
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let (r, r2) = c.link();
+            (r, r2, i)
+        })
+        .collect();
     e.sort_unstable();
     if e.windows(2).any(|w| w[0].0 == w[1].0) {
         return false;
     }
-    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i].1);
-    let (first, mut x, mut steps) = (corners[0].0, corners[0].1, 1);
-    while x != first {
-        match next(x) {
-            Some(y) if steps < n => {
-                x = y;
+    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i]);
+    let first = corners[0].link().0;
+    let (mut cur, mut steps) = (0usize, 0usize);
+    loop {
+        match next(corners[cur].link().1) {
+            Some((_, _, j)) if steps < n => {
+                step_to(cur, j);
+                cur = j;
                 steps += 1;
+                if corners[cur].link().0 == first {
+                    return steps == n;
+                }
             }
             _ => return false,
         }
     }
-    steps == n
 }
 
 /// Whether the fan of `v`, given by its corners `(r, r')` (face `(v, r, r')`) forming a single
@@ -399,10 +432,16 @@ mod tests {
             for i in (1..c.len()).rev() {
                 c.swap(i, r(i as u32 + 1) as usize);
             }
-            // The quadratic test whatever the size.
-            let small = one_cycle_quadratic(&c);
-            assert_eq!(small, one_cycle_sorted(&c), "{c:?}");
+            // The quadratic test whatever the size; on a cycle, both report every corner's
+            // predecessor, the corner whose r' is its r.
+            let (mut p1, mut p2) = (vec![usize::MAX; c.len()], vec![usize::MAX; c.len()]);
+            let small = one_cycle_quadratic(&c, |i, j| p1[j] = i);
+            assert_eq!(small, one_cycle_sorted(&c, |i, j| p2[j] = i), "{c:?}");
             assert_eq!(one_cycle(&c), small);
+            if small {
+                assert_eq!(p1, p2);
+                assert!((0..c.len()).all(|j| p1[j] < c.len() && c[p1[j]].1 == c[j].0));
+            }
             if small { cycles += 1 } else { others += 1 }
         }
         assert!(cycles > 500 && others > 500, "{cycles} / {others}");

@@ -246,13 +246,18 @@ struct Flip {
 
 impl<'a> FlipState<'a> {
     /// `None` unless `mesh` is a closed, oriented 2-manifold.
+    /// `prebuilt`: the half-edges of `mesh` if the caller has them.
     fn new(
         mesh: &TriMesh,
         data: VertexData<'a>,
         h: f64,
         banned: &'a FxHashSet<(u32, u32)>,
+        prebuilt: Option<HalfEdges>,
     ) -> Option<Self> {
-        let he = HalfEdges::new(&mesh.faces, mesh.vertices.len())?;
+        let he = match prebuilt {
+            Some(he) => he,
+            None => HalfEdges::new(&mesh.faces, mesh.vertices.len())?,
+        };
         Some(Self {
             data,
             h,
@@ -350,9 +355,10 @@ fn flip_pass(
     data: VertexData,
     h: f64,
     banned: &FxHashSet<(u32, u32)>,
+    prebuilt: Option<HalfEdges>,
     stats: &mut FlipStats,
 ) -> Vec<(u32, u32)> {
-    let Some(mut st) = FlipState::new(mesh, data, h, banned) else {
+    let Some(mut st) = FlipState::new(mesh, data, h, banned, prebuilt) else {
         return Vec::new();
     };
     let mut flipped = Vec::new();
@@ -603,7 +609,7 @@ pub fn align_creases(
         normals,
         index: None,
     };
-    align(mesh, data, h)
+    align(mesh, data, h, None)
 }
 
 /// [`align_creases`] with the data of mesh vertex `w` at `quadrics[index[w]]` and
@@ -617,6 +623,23 @@ pub fn align_creases_indexed(
     index: &[u32],
     h: f64,
 ) -> FlipStats {
+    align_creases_with(mesh, quadrics, normals, index, h, None)
+}
+
+/// [`align_creases_indexed`] with the half-edges of `mesh` if the caller has them (the
+/// mesher: from its manifold check), instead of building them.
+pub(crate) fn align_creases_with(
+    mesh: &mut TriMesh,
+    quadrics: &[Quadric],
+    normals: &[[f64; 3]],
+    index: &[u32],
+    h: f64,
+    half_edges: Option<HalfEdges>,
+) -> FlipStats {
+    debug_assert!(
+        half_edges.is_none() || half_edges == HalfEdges::new(&mesh.faces, mesh.vertices.len()),
+        "the given half-edges are the mesh's"
+    );
     let len = quadrics.len().min(normals.len());
     if index.len() != mesh.vertices.len() || index.iter().any(|&i| i as usize >= len) {
         return FlipStats::default();
@@ -626,17 +649,19 @@ pub fn align_creases_indexed(
         normals,
         index: Some(index),
     };
-    align(mesh, data, h)
+    align(mesh, data, h, half_edges)
 }
 
-fn align(mesh: &mut TriMesh, data: VertexData, h: f64) -> FlipStats {
+/// `prebuilt`: the half-edges of `mesh` if the caller has them (for the first attempt).
+fn align(mesh: &mut TriMesh, data: VertexData, h: f64, prebuilt: Option<HalfEdges>) -> FlipStats {
     let mut stats = FlipStats::default();
     let original = mesh.faces.clone();
     let mut banned = FxHashSet::default();
+    let mut prebuilt = prebuilt;
     for attempt in 1..=MAX_ATTEMPTS {
         stats.attempts = attempt;
         mesh.faces.clone_from(&original);
-        let flipped = flip_pass(mesh, data, h, &banned, &mut stats);
+        let flipped = flip_pass(mesh, data, h, &banned, prebuilt.take(), &mut stats);
         stats.flips = flipped.len();
         if flipped.is_empty() {
             return stats;
@@ -867,7 +892,11 @@ mod tests {
                     normals: &n,
                     index: None,
                 };
-                let f1 = flip_pass(&mut m1, data, h, banned, &mut s1);
+                // Half the runs on half-edges built beforehand (as the mesher passes them).
+                let prebuilt = (seed % 2 == 0)
+                    .then(|| HalfEdges::new(&mesh.faces, mesh.vertices.len()))
+                    .flatten();
+                let f1 = flip_pass(&mut m1, data, h, banned, prebuilt, &mut s1);
                 let f2 = reference::flip_pass_sweeps(&mut m2, data, h, banned, &mut s2);
                 assert_eq!(f1, f2, "seed {seed}: the flips differ");
                 assert_eq!(m1.faces, m2.faces, "seed {seed}: the faces differ");

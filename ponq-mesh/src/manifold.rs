@@ -15,6 +15,7 @@
 use crate::complex::{Label, TetComplex};
 use crate::delaunay::NONE;
 use crate::extract::boundary_faces;
+use crate::halfedge::{HalfEdges, outgoing_rows};
 use crate::score::face_scores;
 
 /// What the repair did.
@@ -141,44 +142,52 @@ fn flip_cost(cx: &TetComplex, labels: &[Label], set: &[u32], from: Label) -> f64
 /// triangles' opposite edges (the vertex's link in the surface) do not form one simple cycle.
 /// A cheap O(#faces) scan that seeds the repair.
 pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u32> {
-    nonmanifold_vertices_of(&boundary_faces(cx, labels), cx.dt.vertices.len())
+    nonmanifold_vertices_of(&boundary_faces(cx, labels), cx.dt.vertices.len(), false).0
 }
 
 /// [`nonmanifold_surface_vertices`] of the boundary `faces` over `nv` vertices: the link of
 /// `v` in face `(v, b, c)` is the edge `b -> c`, the corner of `v` ([`crate::fan::one_cycle`]
-/// on the corners grouped by vertex, in parallel).
-fn nonmanifold_vertices_of(faces: &[[u32; 3]], nv: usize) -> Vec<u32> {
-    use rayon::prelude::*;
-    let (start, corners) =
-        crate::halfedge::corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
-    (0..nv as u32)
-        .into_par_iter()
-        .with_min_len(1024)
-        .filter(|&v| {
-            let c = &corners[start[v as usize] as usize..start[v as usize + 1] as usize];
-            !c.is_empty() && !crate::fan::one_cycle(c)
-        })
-        .collect()
+/// on the corners grouped by vertex, in parallel); with `half_edges`, also the half-edges of
+/// the faces when there is none ([`HalfEdges::checking_links`]).
+fn nonmanifold_vertices_of(
+    faces: &[[u32; 3]],
+    nv: usize,
+    half_edges: bool,
+) -> (Vec<u32>, Option<HalfEdges>) {
+    let (start, rows) = outgoing_rows(faces, nv);
+    HalfEdges::checking_links(&start, &rows, half_edges)
+}
+
+/// The boundary faces when the repair changed nothing (see [`make_manifold_keeping_faces`]).
+#[derive(Debug, Clone)]
+pub struct KeptSurface {
+    /// The boundary faces ([`boundary_faces`]).
+    pub faces: Vec<[u32; 3]>,
+    /// Their half-edges over the Delaunay vertices, when asked for: every vertex's link is one
+    /// cycle, so they exist (the crease flips take them instead of building them again).
+    pub half_edges: Option<HalfEdges>,
 }
 
 /// Relabels tets until every vertex of the inside/outside boundary is a manifold vertex.
 /// `labels` must hold no [`Label::Unknown`].
 pub fn make_manifold(cx: &TetComplex, labels: &mut [Label]) -> ManifoldStats {
-    make_manifold_keeping_faces(cx, labels).0
+    make_manifold_keeping_faces(cx, labels, false).0
 }
 
 /// [`make_manifold`], also returning the boundary faces ([`boundary_faces`]) when no tet
-/// changed its label (the usual case): the faces the extraction would compute again.
+/// changed its label (the usual case): the faces the extraction would compute again, and, if
+/// `half_edges`, their [`HalfEdges`] from the corners the check grouped by vertex.
 pub fn make_manifold_keeping_faces(
     cx: &TetComplex,
     labels: &mut [Label],
-) -> (ManifoldStats, Option<Vec<[u32; 3]>>) {
+    half_edges: bool,
+) -> (ManifoldStats, Option<KeptSurface>) {
     let mut stats = ManifoldStats::default();
     let nv = cx.dt.vertices.len();
     let faces = boundary_faces(cx, labels);
-    let mut work: Vec<u32> = nonmanifold_vertices_of(&faces, nv);
+    let (mut work, half_edges) = nonmanifold_vertices_of(&faces, nv, half_edges);
     if work.is_empty() {
-        return (stats, Some(faces));
+        return (stats, Some(KeptSurface { faces, half_edges }));
     }
     drop(faces);
     let mut flipped = vec![false; labels.len()];
@@ -338,12 +347,20 @@ mod tests {
             let found = nonmanifold_surface_vertices(&cx, &labels);
             assert_eq!(found, reference(&cx, &labels), "seed {seed}");
             let before = labels.clone();
-            let (stats, faces) = make_manifold_keeping_faces(&cx, &mut labels);
-            match faces {
-                // Kept only when nothing changed: then they are the boundary's.
-                Some(f) => {
+            let want_half_edges = seed % 2 == 0;
+            let (stats, kept) = make_manifold_keeping_faces(&cx, &mut labels, want_half_edges);
+            match kept {
+                // Kept only when nothing changed: then they are the boundary's, and their
+                // half-edges (when asked for) are those `HalfEdges::new` finds.
+                Some(k) => {
                     assert!(found.is_empty() && labels == before);
-                    assert_eq!(f, boundary_faces(&cx, &labels));
+                    assert_eq!(k.faces, boundary_faces(&cx, &labels));
+                    if want_half_edges {
+                        let he = HalfEdges::new(&k.faces, cx.dt.vertices.len());
+                        assert!(he.is_some() && k.half_edges == he, "seed {seed}");
+                    } else {
+                        assert!(k.half_edges.is_none());
+                    }
                 }
                 None => assert!(!found.is_empty()),
             }
@@ -361,8 +378,11 @@ mod tests {
             .find(|&t| !cx.touches_protective(t))
             .unwrap();
         labels[t as usize] = Label::Inside;
-        let (stats, faces) = make_manifold_keeping_faces(&cx, &mut labels);
+        let (stats, kept) = make_manifold_keeping_faces(&cx, &mut labels, true);
         assert_eq!(stats.flipped_tets, 0);
-        assert_eq!(faces.map(|f| f.len()), Some(4));
+        let kept = kept.expect("a manifold boundary");
+        assert_eq!(kept.faces.len(), 4);
+        let he = HalfEdges::new(&kept.faces, cx.dt.vertices.len());
+        assert!(he.is_some() && kept.half_edges == he);
     }
 }

@@ -7,7 +7,8 @@ use crate::cut::{CutStats, min_cut};
 use crate::delaunay::Delaunay;
 use crate::error::{Error, Result};
 use crate::extract::{extract_boundary, extract_faces};
-use crate::manifold::{ManifoldStats, make_manifold_keeping_faces};
+use crate::halfedge::HalfEdges;
+use crate::manifold::{KeptSurface, ManifoldStats, make_manifold_keeping_faces};
 use crate::open_surface::cull_open;
 use crate::ponq::Ponq;
 use crate::quadric::{Quadric, SVD_CUTOFF};
@@ -284,6 +285,7 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
             mut mesh,
             back,
             source,
+            half_edges,
         } = mesh_pass(ponq, opts, &points, &scales, weld_tol, &mut stats)?;
         let t5 = Instant::now();
         let mut source_point: Vec<u32> = back.iter().map(|&v| source[v as usize]).collect();
@@ -291,12 +293,13 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
         if opts.align_creases && opts.open_threshold.is_none() && opts.manifold {
             let t = Instant::now();
             // The mesh vertices' data through `back`, not gathered into new arrays.
-            stats.flips = crate::flips::align_creases_indexed(
+            stats.flips = crate::flips::align_creases_with(
                 &mut mesh,
                 &cx.quadrics,
                 &cx.normals,
                 &back,
                 cx.h,
+                half_edges,
             );
             flip_time = t.elapsed();
             stats.times.flips += flip_time;
@@ -430,6 +433,9 @@ struct Pass {
     back: Vec<u32>,
     /// First input point of each complex vertex (`u32::MAX`: a protective corner).
     source: Vec<u32>,
+    /// The half-edges of `mesh` when the manifold repair changed nothing and the crease flips
+    /// will run (from the corners the repair's check grouped, not grouped again).
+    half_edges: Option<HalfEdges>,
 }
 
 /// Delaunay, tagging, cut, manifold repair and extraction of the points `vstars` (one per
@@ -589,17 +595,26 @@ fn mesh_pass(
     stats.times.cut += t3.elapsed();
 
     let t4 = Instant::now();
-    let mut faces = None;
+    let mut kept = None;
     if opts.manifold {
-        // The repair's boundary faces are the output's when it changed nothing.
-        (stats.manifold, faces) = make_manifold_keeping_faces(&cx, &mut labels);
+        // The repair's boundary faces are the output's when it changed nothing, and their
+        // half-edges are the crease flips'.
+        let flips = opts.align_creases && opts.open_threshold.is_none();
+        (stats.manifold, kept) = make_manifold_keeping_faces(&cx, &mut labels, flips);
     }
     stats.times.manifold += t4.elapsed();
 
     let t5 = Instant::now();
-    let (mesh, back) = match faces {
-        Some(faces) => extract_faces(&cx, faces),
-        None => extract_boundary(&cx, &labels),
+    let (mesh, back, half_edges) = match kept {
+        Some(KeptSurface { faces, half_edges }) => {
+            let (mesh, back) = extract_faces(&cx, faces);
+            let half_edges = half_edges.map(|he| he.renumbered(&back));
+            (mesh, back, half_edges)
+        }
+        None => {
+            let (mesh, back) = extract_boundary(&cx, &labels);
+            (mesh, back, None)
+        }
     };
     stats.times.extraction += t5.elapsed();
     Ok(Pass {
@@ -607,6 +622,7 @@ fn mesh_pass(
         mesh,
         back,
         source,
+        half_edges,
     })
 }
 

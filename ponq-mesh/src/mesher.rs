@@ -580,14 +580,11 @@ fn mesh_pass(
         opts.grid_scale * opts.grid_scale,
     );
     let mut labels = tag_all(&cx, opts.small_tet_factor, opts.small_tet_rule);
-    stats.tagged = [0; 3];
-    for l in &labels {
-        match l {
-            Label::Inside => stats.tagged[0] += 1,
-            Label::Outside => stats.tagged[1] += 1,
-            Label::Unknown => stats.tagged[2] += 1,
-        }
-    }
+    // Counted by comparisons the compiler vectorises: a `match` per label branched on random
+    // labels (~1.1 ms at 686k tets).
+    let count = |which: Label| labels.iter().map(|&l| (l == which) as usize).sum::<usize>();
+    let (inside, outside) = (count(Label::Inside), count(Label::Outside));
+    stats.tagged = [inside, outside, labels.len() - inside - outside];
     stats.times.tagging += t2.elapsed();
 
     let t3 = Instant::now();

@@ -33,9 +33,21 @@ pub fn min_cut(cx: &TetComplex, labels: &mut [Label]) -> CutStats {
     for (i, &t) in unknown.iter().enumerate() {
         id[t as usize] = i as u32;
     }
+    // A face between two unknown tets is scored from the smaller one only, where its arc is
+    // added below: the other side's score would never be read (about 40% of the faces).
+    let seen: &[Label] = labels;
     let scores: Vec<[(f64, f64); 4]> = unknown
         .par_iter()
-        .map(|&t| std::array::from_fn(|k| face_scores(cx, t, k)))
+        .map(|&t| {
+            let mut s = [(0.0, 0.0); 4];
+            for (k, s) in s.iter_mut().enumerate() {
+                let nb = cx.neighbor(t, k);
+                if nb == NONE || nb > t || seen[nb as usize] != Label::Unknown {
+                    *s = face_scores(cx, t, k);
+                }
+            }
+            s
+        })
         .collect();
     let mut g = Graph::new(unknown.len(), 2 * unknown.len());
     let mut edges = 0;

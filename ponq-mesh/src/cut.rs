@@ -20,6 +20,20 @@ pub struct CutStats {
     pub flow: f64,
 }
 
+/// What one face of an unknown tet `t` adds to the cut's graph.
+#[derive(Debug, Clone, Copy)]
+enum Part {
+    /// Nothing (a face shared with a smaller unknown tet, whose arc it is).
+    Nothing,
+    /// The arc to the unknown tet of this node number, with the capacities out of `t` and into
+    /// it.
+    Arc(u32, f64, f64),
+    /// Capacity from the source (an inside neighbour).
+    Source(f64),
+    /// Capacity to the sink (an outside neighbour, or the hull).
+    Sink(f64),
+}
+
 /// Replaces every [`Label::Unknown`] by [`Label::Inside`] or [`Label::Outside`].
 pub fn min_cut(cx: &TetComplex, labels: &mut [Label]) -> CutStats {
     use rayon::prelude::*;
@@ -33,43 +47,51 @@ pub fn min_cut(cx: &TetComplex, labels: &mut [Label]) -> CutStats {
     for (i, &t) in unknown.iter().enumerate() {
         id[t as usize] = i as u32;
     }
-    // A face between two unknown tets is scored from the smaller one only, where its arc is
-    // added below: the other side's score would never be read (about 40% of the faces).
+    // Each face's contribution to the graph, found in parallel (the neighbours, their labels
+    // and the face scores are reads all over the tets), then added in the order of the tets
+    // and faces (the sums of terminal capacities, in floating point, do not depend on the
+    // thread count). A face between two unknown tets is scored from the smaller one only,
+    // where its arc is added: the other side's score is never read (about 40% of the faces).
     let seen: &[Label] = labels;
-    let scores: Vec<[(f64, f64); 4]> = unknown
+    let id = &id;
+    let parts: Vec<[Part; 4]> = unknown
         .par_iter()
         .map(|&t| {
-            let mut s = [(0.0, 0.0); 4];
-            for (k, s) in s.iter_mut().enumerate() {
+            let mut parts = [Part::Nothing; 4];
+            for (k, part) in parts.iter_mut().enumerate() {
                 let nb = cx.neighbor(t, k);
-                if nb == NONE || nb > t || seen[nb as usize] != Label::Unknown {
-                    *s = face_scores(cx, t, k);
-                }
+                let label = if nb == NONE {
+                    Label::Outside
+                } else {
+                    seen[nb as usize]
+                };
+                *part = match label {
+                    Label::Unknown if nb < t => Part::Nothing,
+                    Label::Unknown => {
+                        let (out_of_t, into_t) = face_scores(cx, t, k);
+                        Part::Arc(id[nb as usize], out_of_t, into_t)
+                    }
+                    // Cut when t is outside: the face is then seen from the inside neighbour.
+                    Label::Inside => Part::Source(face_scores(cx, t, k).1),
+                    // Cut when t is inside (the hull counts as outside).
+                    Label::Outside => Part::Sink(face_scores(cx, t, k).0),
+                };
             }
-            s
+            parts
         })
         .collect();
     let mut g = Graph::new(unknown.len(), 2 * unknown.len());
     let mut edges = 0;
-    for (i, &t) in unknown.iter().enumerate() {
-        for k in 0..4 {
-            let (out_of_t, into_t) = scores[i][k];
-            let nb = cx.neighbor(t, k);
-            if nb == NONE {
-                g.add_tweights(i, 0.0, out_of_t);
-                continue;
-            }
-            match labels[nb as usize] {
-                Label::Unknown => {
-                    if nb > t {
-                        g.add_edge(i, id[nb as usize] as usize, out_of_t, into_t);
-                        edges += 1;
-                    }
+    for (i, parts) in parts.iter().enumerate() {
+        for part in parts {
+            match *part {
+                Part::Nothing => {}
+                Part::Arc(j, out_of_t, into_t) => {
+                    g.add_edge(i, j as usize, out_of_t, into_t);
+                    edges += 1;
                 }
-                // Cut when t is outside: the face is then seen from the inside neighbour.
-                Label::Inside => g.add_tweights(i, into_t, 0.0),
-                // Cut when t is inside.
-                Label::Outside => g.add_tweights(i, 0.0, out_of_t),
+                Part::Source(c) => g.add_tweights(i, c, 0.0),
+                Part::Sink(c) => g.add_tweights(i, 0.0, c),
             }
         }
     }

@@ -618,7 +618,13 @@ impl Delaunay {
         let mut built = None;
         for (attempt, &scale) in SUPER_SCALES.iter().enumerate() {
             let t = Instant::now();
-            let sorted: Vec<[f64; 3]> = order.iter().map(|&i| vertices[i as usize]).collect();
+            // In parallel (a gather through the insertion order), with room for the
+            // super-tetrahedron's four vertices, which `Builder::new` adds.
+            let mut sorted: Vec<[f64; 3]> = Vec::with_capacity(order.len() + 4);
+            order
+                .par_iter()
+                .map(|&i| vertices[i as usize])
+                .collect_into_vec(&mut sorted);
             let (mut dt, filled) =
                 Builder::new(sorted, order.clone(), capacity, scale)?.run(&rounds, opts);
             // `finish` timed the output stage (the hull check alone for a failed attempt).

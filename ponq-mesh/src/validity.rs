@@ -487,15 +487,30 @@ pub fn intersecting_face_pairs_among(mesh: &TriMesh, faces: &[usize]) -> Vec<(us
     let info: Vec<u8> = faces.iter().map(|&f| face_info(mesh, f)).collect();
     let bvh = Bvh::build(&boxes);
     // Most faces are far from all of `faces`: one bit of a grid of the cells they cover
-    // rejects them without a descent of the hierarchy (exact, see `cover_grid`).
+    // rejects them without a descent of the hierarchy (exact, see `cover_grid`). With finite
+    // vertices, from the vertices' keys (their cells, computed once), not from the faces'
+    // boxes: three 8-byte reads per face instead of three 24-byte ones.
     let grid = CoverGrid::new(&boxes, 1 << 20);
+    let keys: Option<Vec<u64>> = grid.as_ref().filter(|g| g.has_point_keys()).and_then(|g| {
+        mesh.vertices
+            .par_iter()
+            .map(|&p| p.iter().all(|x| x.is_finite()).then(|| g.point_key(p)))
+            .collect()
+    });
     let mut v: Vec<(usize, usize)> = (0..mesh.faces.len())
         .into_par_iter()
         .fold(Vec::new, |mut acc, f| {
-            let b = Aabb::from_points(&mesh.triangle(f));
-            if grid.as_ref().is_some_and(|g| !g.may_overlap(&b)) {
+            let maybe = match (&grid, &keys) {
+                (Some(g), Some(keys)) => {
+                    g.may_overlap_points(mesh.faces[f].map(|v| keys[v as usize]))
+                }
+                (Some(g), None) => g.may_overlap(&Aabb::from_points(&mesh.triangle(f))),
+                (None, _) => true,
+            };
+            if !maybe {
                 return acc;
             }
+            let b = Aabb::from_points(&mesh.triangle(f));
             let mut fi = None;
             bvh.query_overlaps(&b, |k| {
                 let g = faces[k];

@@ -76,7 +76,12 @@ fn main() {
     let value_of = |flag: &str| {
         args.windows(2)
             .filter(|w| w[0] == flag)
-            .map(|w| w[1].parse::<usize>().expect("a number after the flag"))
+            .map(|w| {
+                w[1].parse::<usize>().unwrap_or_else(|_| {
+                    eprintln!("error: {flag} takes a number, got {}\n\n{USAGE}", w[1]);
+                    std::process::exit(2);
+                })
+            })
             .collect::<Vec<_>>()
     };
     let only = value_of("--grid");
@@ -87,10 +92,6 @@ fn main() {
         .find(|w| w[0] == "--save")
         .map(|w| std::path::PathBuf::from(&w[1]));
     let repeat = value_of("--repeat").last().copied().unwrap_or(3).max(1);
-    println!(
-        "| input | points | tets | prepare ms | delaunay ms | tagging ms | cut ms | manifold ms | extraction ms | flips ms | total ms | V / F | valid | check ms |"
-    );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
     const STANDARD: [(usize, usize); 4] = [
         (32, 80_000),
         (72, 300_000),
@@ -102,10 +103,10 @@ fn main() {
     } else {
         only.iter()
             .map(|&g| {
-                assert!(
-                    (16..=1024).contains(&g),
-                    "--grid {g}: give a grid from 16 to 1024"
-                );
+                if !(16..=1024).contains(&g) {
+                    eprintln!("error: --grid {g}: give a grid from 16 to 1024\n\n{USAGE}");
+                    std::process::exit(2);
+                }
                 let samples = STANDARD
                     .iter()
                     .find(|s| s.0 == g)
@@ -114,6 +115,10 @@ fn main() {
             })
             .collect()
     };
+    println!(
+        "| input | points | tets | prepare ms | delaunay ms | tagging ms | cut ms | manifold ms | extraction ms | flips ms | total ms | V / F | valid | check ms |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|");
     for (grid, samples) in grids {
         let ponq = ponq_by_grid(&cad_union_samples(samples), grid);
         if let Some(dir) = &save {

@@ -653,11 +653,15 @@ pub(crate) fn align_creases_with(
 }
 
 /// `prebuilt`: the half-edges of `mesh` if the caller has them (for the first attempt).
-fn align(mesh: &mut TriMesh, data: VertexData, h: f64, prebuilt: Option<HalfEdges>) -> FlipStats {
+fn align(
+    mesh: &mut TriMesh,
+    data: VertexData,
+    h: f64,
+    mut prebuilt: Option<HalfEdges>,
+) -> FlipStats {
     let mut stats = FlipStats::default();
     let original = mesh.faces.clone();
     let mut banned = FxHashSet::default();
-    let mut prebuilt = prebuilt;
     for attempt in 1..=MAX_ATTEMPTS {
         stats.attempts = attempt;
         mesh.faces.clone_from(&original);

@@ -123,7 +123,13 @@ fn main() {
         let ponq = ponq_by_grid(&cad_union_samples(samples), grid);
         if let Some(dir) = &save {
             let path = dir.join(format!("synthetic_{grid}.npz"));
-            io::npz::write_ponq(&path, &ponq).expect("writing the PoNQ");
+            if let Err(e) = std::fs::create_dir_all(dir)
+                .map_err(|e| e.to_string())
+                .and_then(|()| io::npz::write_ponq(&path, &ponq).map_err(|e| e.to_string()))
+            {
+                eprintln!("error: --save {}: {e}", path.display());
+                std::process::exit(2);
+            }
         }
         row(
             &format!("synthetic grid {grid}"),

@@ -14,7 +14,9 @@ use common::*;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::{Ponq, io, validity};
 
-fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize) {
+/// Prints the table row of `ponq`: the stage times of the run with the best total, or with
+/// `stage_best` each stage's best over the runs (the total stays the best total).
+fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize, stage_best: bool) {
     let opts = MeshingOptions {
         grid_scale: grid,
         ..Default::default()
@@ -22,31 +24,58 @@ fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize) {
     // Warm-up run, then the best of `repeat` (3 unless `--repeat N`).
     let _ = mesh_ponq(ponq, &opts);
     let mut best = None;
+    let mut stages_best: Option<[std::time::Duration; 7]> = None;
     for _ in 0..repeat {
         let t = Instant::now();
         let out = mesh_ponq(ponq, &opts).expect("meshing");
         let wall = t.elapsed();
+        let s = &out.stats.times;
+        let stages = [
+            s.prepare,
+            s.delaunay,
+            s.tagging,
+            s.cut,
+            s.manifold,
+            s.extraction,
+            s.flips,
+        ];
+        stages_best = Some(match stages_best {
+            None => stages,
+            Some(b) => std::array::from_fn(|k| b[k].min(stages[k])),
+        });
         if best.as_ref().is_none_or(|(w, _)| wall < *w) {
             best = Some((wall, out));
         }
     }
     let (wall, out) = best.expect("ran");
+    let s = &out.stats.times;
+    let stages = match stages_best {
+        Some(b) if stage_best => b,
+        _ => [
+            s.prepare,
+            s.delaunay,
+            s.tagging,
+            s.cut,
+            s.manifold,
+            s.extraction,
+            s.flips,
+        ],
+    };
     let t = Instant::now();
     let valid = validity::check(&out.mesh);
     let check = t.elapsed();
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    let s = &out.stats;
     println!(
         "| {name} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {} / {} | {} | {:.1} |",
-        s.points,
-        s.tets,
-        ms(s.times.prepare),
-        ms(s.times.delaunay),
-        ms(s.times.tagging),
-        ms(s.times.cut),
-        ms(s.times.manifold),
-        ms(s.times.extraction),
-        ms(s.times.flips),
+        out.stats.points,
+        out.stats.tets,
+        ms(stages[0]),
+        ms(stages[1]),
+        ms(stages[2]),
+        ms(stages[3]),
+        ms(stages[4]),
+        ms(stages[5]),
+        ms(stages[6]),
         ms(wall),
         out.mesh.vertices.len(),
         out.mesh.faces.len(),
@@ -59,11 +88,14 @@ const USAGE: &str = "\
 Meshing benchmark: synthetic CAD-like PoNQs (grids 32, 72, 145, 230: ~2k to ~109k points),
 the time of each meshing stage (best of N after a warm-up run) and of the validity check.
 
-usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N] [--save DIR] [FILE.npz ...]
+usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N] [--stage-best] [--save DIR] [FILE.npz ...]
 
   --grid G      only this synthetic grid (repeatable); another grid than the four (16 to
                 1024) gets about 47 G^2 surface samples, like grid 230 (221: ~100k points)
   --repeat N    best of N runs (default 3): a long run for a profiler
+  --stage-best  each stage column: that stage's best over the N runs, instead of its time
+                in the run with the best total (steadier for comparing one stage between
+                builds on a noisy machine; the total column stays the best total)
   --save DIR    also write each synthetic PoNQ as DIR/synthetic_G.npz (for another build's
                 ponq-mesh: benches/mesh_side_by_side.sh)
   FILE.npz      PoNQ files meshed too (grid scale from a _32 / _64 / _128 suffix, else 32)
@@ -72,7 +104,8 @@ usage: cargo bench -p ponq-mesh --bench mesh_bench -- [--grid G]... [--repeat N]
 fn main() {
     // `--grid G` (repeatable) keeps only those synthetic grids, `--repeat N` times each: a
     // run for a profiler that is mostly meshing.
-    let args = args::parse(USAGE, &["--grid", "--repeat", "--save"]);
+    let args = args::parse(USAGE, &["--grid", "--repeat", "--save", "--stage-best"]);
+    let stage_best = args.iter().any(|a| a == "--stage-best");
     let value_of = |flag: &str| {
         args.windows(2)
             .filter(|w| w[0] == flag)
@@ -136,6 +169,7 @@ fn main() {
             &ponq,
             grid as f64,
             repeat,
+            stage_best,
         );
     }
     for arg in args.iter().filter(|a| a.ends_with(".npz")) {
@@ -147,7 +181,7 @@ fn main() {
             32.0
         };
         match io::npz::read_ponq(arg) {
-            Ok(p) => row(arg, &p, grid, repeat),
+            Ok(p) => row(arg, &p, grid, repeat, stage_best),
             Err(e) => eprintln!("{arg}: {e}"),
         }
     }

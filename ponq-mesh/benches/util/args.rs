@@ -2,7 +2,7 @@
 
 /// The arguments given after `--` (without the `--bench` that cargo adds). Prints `usage` and
 /// exits for `-h` / `--help`; exits with code 2 on an option that is not in `options` (the
-/// options a benchmark takes, each followed by a value).
+/// options a benchmark takes; the benchmark reads their values, if any).
 pub fn parse(usage: &str, options: &[&str]) -> Vec<String> {
     let args: Vec<String> = std::env::args()
         .skip(1)

@@ -105,7 +105,10 @@ impl HalfEdges {
         let row = |v: u32| &rows[start[v as usize] as usize..start[v as usize + 1] as usize];
         // Written once per half-edge when every link is one cycle (else dropped).
         let opp: Vec<AtomicU32> = if half_edges {
-            (0..rows.len()).map(|_| AtomicU32::new(NONE)).collect()
+            (0..rows.len())
+                .into_par_iter()
+                .map(|_| AtomicU32::new(NONE))
+                .collect()
         } else {
             Vec::new()
         };
@@ -125,9 +128,13 @@ impl HalfEdges {
         if !half_edges || !bad.is_empty() {
             return (bad, None);
         }
-        let opp: Vec<u32> = opp.into_iter().map(AtomicU32::into_inner).collect();
-        let degree: Vec<u32> = (0..n).map(|v| start[v + 1] - start[v]).collect();
+        let opp: Vec<u32> = opp.into_par_iter().map(AtomicU32::into_inner).collect();
+        let degree: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map(|v| start[v + 1] - start[v])
+            .collect();
         let out: Vec<u32> = (0..n as u32)
+            .into_par_iter()
             .map(|v| row(v).first().map_or(NONE, |o| o.h))
             .collect();
         (bad, Some(Self { opp, out, degree }))
@@ -290,29 +297,83 @@ impl HalfEdges {
 /// of vertex `v` are `rows[start[v]..start[v + 1]]`, in face order, each made by
 /// `corner(face index, face, k)` for the face's position `k` holding `v`. Every index of
 /// `faces` must be below `n`.
-pub(crate) fn corner_rows<T: Copy + Default>(
+///
+/// In parallel over vertex ranges: each thread scans all faces and counts, then writes, the
+/// corners of its own range only (its part of `rows`), so the rows come out the same as from
+/// one scan. A single scan was sequential and, past the cache, bound by its scattered writes
+/// (at 870k faces ~20 ms, 12 times its time at 200k faces).
+pub(crate) fn corner_rows<T: Copy + Default + Send + Sync>(
     faces: &[[u32; 3]],
     n: usize,
-    corner: impl Fn(usize, &[u32; 3], usize) -> T,
+    corner: impl Fn(usize, &[u32; 3], usize) -> T + Sync,
 ) -> (Vec<u32>, Vec<T>) {
+    // Small inputs in one range: a thread's start-up costs more than the scan.
+    let parts = if faces.len() < 1 << 15 {
+        1
+    } else {
+        rayon::current_num_threads().clamp(1, 16)
+    };
+    corner_rows_in_parts(faces, n, parts, corner)
+}
+
+/// [`corner_rows`] with the vertices cut into `parts` ranges (at least one).
+fn corner_rows_in_parts<T: Copy + Default + Send + Sync>(
+    faces: &[[u32; 3]],
+    n: usize,
+    parts: usize,
+    corner: impl Fn(usize, &[u32; 3], usize) -> T + Sync,
+) -> (Vec<u32>, Vec<T>) {
+    use rayon::prelude::*;
+    let parts = parts.max(1);
+    // Range `c`: the vertices from `bound(c)` to `bound(c + 1)`.
+    let chunk = n.div_ceil(parts).max(1);
+    let bound = |c: usize| (chunk * c).min(n) as u32;
+    // `start[v + 1]` counts the corners of `v`, then the prefix sums make it the row ends.
     let mut start = vec![0u32; n + 1];
-    for f in faces {
-        for &v in f {
-            start[v as usize + 1] += 1;
-        }
-    }
+    start[1..]
+        .par_chunks_mut(chunk)
+        .enumerate()
+        .for_each(|(c, count)| {
+            let lo = bound(c);
+            for f in faces {
+                for &v in f {
+                    if let Some(x) = v.checked_sub(lo).and_then(|i| count.get_mut(i as usize)) {
+                        *x += 1;
+                    }
+                }
+            }
+        });
     for v in 0..n {
         start[v + 1] += start[v];
     }
-    let mut fill = start.clone();
     let mut rows = vec![T::default(); start[n] as usize];
-    for (fi, f) in faces.iter().enumerate() {
-        for k in 0..3 {
-            let v = f[k] as usize;
-            rows[fill[v] as usize] = corner(fi, f, k);
-            fill[v] += 1;
-        }
+    // Each range's rows are one slice of `rows`.
+    let mut slices = Vec::with_capacity(parts);
+    let mut rest = &mut rows[..];
+    for c in 0..parts {
+        let len = (start[bound(c + 1) as usize] - start[bound(c) as usize]) as usize;
+        let (mine, tail) = rest.split_at_mut(len);
+        slices.push((c, mine));
+        rest = tail;
     }
+    slices.into_par_iter().for_each(|(c, mine)| {
+        let (lo, hi) = (bound(c), bound(c + 1));
+        let base = start[lo as usize];
+        let mut fill: Vec<u32> = start[lo as usize..hi as usize]
+            .iter()
+            .map(|&s| s - base)
+            .collect();
+        for (fi, f) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let v = f[k];
+                if v >= lo && v < hi {
+                    let i = &mut fill[(v - lo) as usize];
+                    mine[*i as usize] = corner(fi, f, k);
+                    *i += 1;
+                }
+            }
+        }
+    });
     (start, rows)
 }
 
@@ -333,6 +394,36 @@ mod tests {
             [3, 1, 5],
             [0, 3, 5],
         ]
+    }
+
+    /// The corner rows in any number of vertex ranges are those of one plain counting sort,
+    /// on random faces over vertices some of which are in no face.
+    #[test]
+    fn corner_rows_in_parts_are_one_scans() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        for (n, nf) in [(0, 0), (1, 0), (3, 1), (7, 5), (1000, 3000), (4097, 40_000)] {
+            let faces: Vec<[u32; 3]> = (0..nf)
+                .map(|_| [0; 3].map(|_| rng.random_range(0..n as u32)))
+                .collect();
+            let corner = |fi: usize, f: &[u32; 3], k: usize| (fi as u32, f[(k + 1) % 3]);
+            let mut start = vec![0u32; n + 1];
+            let mut rows: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+            for (fi, f) in faces.iter().enumerate() {
+                for k in 0..3 {
+                    rows[f[k] as usize].push(corner(fi, f, k));
+                }
+            }
+            for v in 0..n {
+                start[v + 1] = start[v] + rows[v].len() as u32;
+            }
+            let flat: Vec<(u32, u32)> = rows.concat();
+            for parts in [1, 2, 3, 5, 16] {
+                let got = corner_rows_in_parts(&faces, n, parts, corner);
+                assert_eq!(got, (start.clone(), flat.clone()), "n {n}, {parts} parts");
+            }
+            assert_eq!(corner_rows(&faces, n, corner), (start, flat), "n {n}");
+        }
     }
 
     fn check_invariants(he: &HalfEdges, faces: &[[u32; 3]], n: usize) {

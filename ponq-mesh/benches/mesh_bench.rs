@@ -8,11 +8,24 @@ mod args;
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use common::*;
-use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::mesher::{MeshingOptions, StageTimes, mesh_ponq};
 use ponq_mesh::{Ponq, io, validity};
+
+/// The stage times in the table's column order.
+fn stage_columns(s: &StageTimes) -> [Duration; 7] {
+    [
+        s.prepare,
+        s.delaunay,
+        s.tagging,
+        s.cut,
+        s.manifold,
+        s.extraction,
+        s.flips,
+    ]
+}
 
 /// Prints the table row of `ponq`: the stage times of the run with the best total, or with
 /// `stage_best` each stage's best over the runs (the total stays the best total).
@@ -24,21 +37,18 @@ fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize, stage_best: bool) {
     // Warm-up run, then the best of `repeat` (3 unless `--repeat N`).
     let _ = mesh_ponq(ponq, &opts);
     let mut best = None;
-    let mut stages_best: Option<[std::time::Duration; 7]> = None;
+    let mut stages_best: Option<[Duration; 7]> = None;
     for _ in 0..repeat {
         let t = Instant::now();
-        let out = mesh_ponq(ponq, &opts).expect("meshing");
+        let out = match mesh_ponq(ponq, &opts) {
+            Ok(out) => out,
+            Err(e) => {
+                eprintln!("error: {name}: {e}");
+                std::process::exit(2);
+            }
+        };
         let wall = t.elapsed();
-        let s = &out.stats.times;
-        let stages = [
-            s.prepare,
-            s.delaunay,
-            s.tagging,
-            s.cut,
-            s.manifold,
-            s.extraction,
-            s.flips,
-        ];
+        let stages = stage_columns(&out.stats.times);
         stages_best = Some(match stages_best {
             None => stages,
             Some(b) => std::array::from_fn(|k| b[k].min(stages[k])),
@@ -48,23 +58,14 @@ fn row(name: &str, ponq: &Ponq, grid: f64, repeat: usize, stage_best: bool) {
         }
     }
     let (wall, out) = best.expect("ran");
-    let s = &out.stats.times;
     let stages = match stages_best {
         Some(b) if stage_best => b,
-        _ => [
-            s.prepare,
-            s.delaunay,
-            s.tagging,
-            s.cut,
-            s.manifold,
-            s.extraction,
-            s.flips,
-        ],
+        _ => stage_columns(&out.stats.times),
     };
     let t = Instant::now();
     let valid = validity::check(&out.mesh);
     let check = t.elapsed();
-    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
     println!(
         "| {name} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {} / {} | {} | {:.1} |",
         out.stats.points,

@@ -339,46 +339,34 @@ fn corner_rows_in_parts<T: Copy + Default + Send + Sync>(
     corner: impl Fn(usize, &[u32; 3], usize) -> T + Sync,
 ) -> (Vec<u32>, Vec<T>) {
     use rayon::prelude::*;
-    if parts <= 1 {
-        // One scan on this thread (no call into the pool).
-        let mut start = vec![0u32; n + 1];
-        for f in faces {
-            for &v in f {
-                start[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..n {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut rows = vec![T::default(); start[n] as usize];
-        for (fi, f) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let v = f[k] as usize;
-                rows[fill[v] as usize] = corner(fi, f, k);
-                fill[v] += 1;
-            }
-        }
-        return (start, rows);
-    }
-    // Range `c`: the vertices from `bound(c)` to `bound(c + 1)`.
+    // Range `c`: the vertices from `bound(c)` to `bound(c + 1)`. One range runs on this
+    // thread (no call into the pool), several in parallel.
+    let parts = parts.max(1);
     let chunk = n.div_ceil(parts).max(1);
     let bound = |c: usize| (chunk * c).min(n) as u32;
     // `start[v + 1]` counts the corners of `v`, then the prefix sums make it the row ends.
     let mut start = vec![0u32; n + 1];
-    start[1..]
-        .par_chunks_mut(chunk)
-        .enumerate()
-        .for_each(|(c, count)| {
-            let lo = bound(c);
-            for f in faces {
-                for &v in f {
-                    if let Some(x) = v.checked_sub(lo).and_then(|i| count.get_mut(i as usize)) {
-                        *x += 1;
-                    }
+    let count_range = |(c, count): (usize, &mut [u32])| {
+        let lo = bound(c);
+        for f in faces {
+            for &v in f {
+                if let Some(x) = v.checked_sub(lo).and_then(|i| count.get_mut(i as usize)) {
+                    *x += 1;
                 }
             }
-        });
+        }
+    };
+    if parts == 1 {
+        start[1..]
+            .chunks_mut(chunk)
+            .enumerate()
+            .for_each(count_range);
+    } else {
+        start[1..]
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .for_each(count_range);
+    }
     for v in 0..n {
         start[v + 1] += start[v];
     }
@@ -392,7 +380,7 @@ fn corner_rows_in_parts<T: Copy + Default + Send + Sync>(
         slices.push((c, mine));
         rest = tail;
     }
-    slices.into_par_iter().for_each(|(c, mine)| {
+    let fill_range = |(c, mine): (usize, &mut [T])| {
         let (lo, hi) = (bound(c), bound(c + 1));
         let base = start[lo as usize];
         let mut fill: Vec<u32> = start[lo as usize..hi as usize]
@@ -409,7 +397,12 @@ fn corner_rows_in_parts<T: Copy + Default + Send + Sync>(
                 }
             }
         }
-    });
+    };
+    if parts == 1 {
+        slices.into_iter().for_each(fill_range);
+    } else {
+        slices.into_par_iter().for_each(fill_range);
+    }
     (start, rows)
 }
 

@@ -500,17 +500,15 @@ pub fn intersecting_face_pairs_among(mesh: &TriMesh, faces: &[usize]) -> Vec<(us
     let mut v: Vec<(usize, usize)> = (0..mesh.faces.len())
         .into_par_iter()
         .fold(Vec::new, |mut acc, f| {
-            let maybe = match (&grid, &keys) {
-                (Some(g), Some(keys)) => {
-                    g.may_overlap_points(mesh.faces[f].map(|v| keys[v as usize]))
-                }
-                (Some(g), None) => g.may_overlap(&Aabb::from_points(&mesh.triangle(f))),
-                (None, _) => true,
-            };
-            if !maybe {
+            if let (Some(g), Some(keys)) = (&grid, &keys)
+                && !g.may_overlap_points(mesh.faces[f].map(|v| keys[v as usize]))
+            {
                 return acc;
             }
             let b = Aabb::from_points(&mesh.triangle(f));
+            if keys.is_none() && grid.as_ref().is_some_and(|g| !g.may_overlap(&b)) {
+                return acc;
+            }
             let mut fi = None;
             bvh.query_overlaps(&b, |k| {
                 let g = faces[k];

@@ -916,11 +916,9 @@ struct Worker {
     /// is never cleared (but when the generation wraps around).
     table: Vec<EdgeSlot>,
     generation: u32,
-    /// Local numbers of the cavity boundary's vertices (see [`Worker::link_small`]), indexed
-    /// by vertex; only the entries of the current boundary mean anything.
+    /// The first slot of each vertex of the cavity boundary (see [`Worker::link_small`]),
+    /// indexed by vertex; only the entries of the current boundary mean anything.
     local_id: Vec<u8>,
-    /// The local numbers of each new tet's boundary face, in [`APEX_FACE`] order.
-    face_ids: Vec<[u8; 3]>,
     /// `edge_map[x * SMALL_CAVITY + y]`: the new tet with the directed edge `x -> y`.
     edge_map: Box<[u32; SMALL_CAVITY * SMALL_CAVITY]>,
 }
@@ -950,7 +948,6 @@ impl Worker {
             table: vec![EdgeSlot::default(); 256],
             generation: 0,
             local_id: Vec::new(),
-            face_ids: Vec::new(),
             edge_map: Box::new([0; SMALL_CAVITY * SMALL_CAVITY]),
         }
     }
@@ -1097,53 +1094,65 @@ impl Worker {
     /// `map[x][y]`, then each tet reads its neighbour across `x -> y` at `map[y][x]`. No
     /// hashing, no probing and no branch on the data. Returns `false` (nothing changed) for a
     /// larger boundary.
+    ///
+    /// The local numbers follow the order of first visit. Numbering in one pass (read the
+    /// vertex's number, give the next one if it has none) makes every step wait for the
+    /// store of an earlier step to the same vertex (~8 cycles each, ~10% of an insertion);
+    /// here each vertex's first slot is found by stores alone, the count of first visits is a
+    /// chain of one-cycle additions, and every other read is independent.
     fn link_small(&mut self, sh: &Shared) -> bool {
         const L: usize = SMALL_CAVITY;
-        // A triangulated sphere with V vertices has 2V - 4 faces.
-        if self.new_tets.len() > 2 * L - 4 {
+        // A triangulated sphere with V vertices has 2V - 4 faces, so at most this many slots
+        // (three per face), each below `u8::MAX`.
+        const SLOTS: usize = 3 * (2 * L - 4);
+        const { assert!(SLOTS < u8::MAX as usize) };
+        let faces = self.new_tets.len();
+        if faces > 2 * L - 4 {
             return false;
         }
         if self.local_id.len() < sh.pos.len() {
             self.local_id.resize(sh.pos.len(), 0);
         }
-        for &(tv, _, k) in &self.new_tets {
-            for p in APEX_FACE[k as usize] {
-                self.local_id[tv[p] as usize] = u8::MAX;
+        let slots = 3 * faces;
+        // Slot `3 f + q`: vertex `q` of new tet `f`'s boundary face, in `APEX_FACE` order.
+        let mut xs = [0u32; SLOTS];
+        for (f, &(tv, _, k)) in self.new_tets.iter().enumerate() {
+            for (q, p) in APEX_FACE[k as usize].into_iter().enumerate() {
+                xs[3 * f + q] = tv[p];
             }
         }
-        // At most 3 * 60 vertex visits: a count below 255 never meets the marker.
-        // (A plain loop over locals: as an array `map` closure the count lived in memory.)
+        let xs = &xs[..slots];
+        // Each vertex's first slot: written from the last slot back, so the first one stays.
+        let first_slot = &mut self.local_id[..];
+        for (s, &x) in xs.iter().enumerate().rev() {
+            first_slot[x as usize] = s as u8;
+        }
+        // `number[s]`: the local number of slot `s`'s vertex. A first slot gives the count of
+        // first slots before it; any other reads its first slot's (written before it).
+        // (256 entries: indexed by a `u8`, no bounds checks.)
+        let mut number = [0u8; 256];
         let mut count = 0u8;
-        self.face_ids.clear();
-        let local_id = &mut self.local_id[..];
-        for &(tv, _, k) in &self.new_tets {
-            let mut ids = [0u8; 3];
-            for q in 0..3 {
-                let x = tv[APEX_FACE[k as usize][q]] as usize;
-                let cur = local_id[x];
-                let fresh = cur == u8::MAX;
-                let id = if fresh { count } else { cur };
-                local_id[x] = id;
-                count += fresh as u8;
-                ids[q] = id;
-            }
-            self.face_ids.push(ids);
+        for (s, &x) in xs.iter().enumerate() {
+            let f = first_slot[x as usize];
+            let fresh = f as usize == s;
+            let seen = number[f as usize];
+            number[s as u8 as usize] = if fresh { count } else { seen };
+            count += fresh as u8;
         }
         if count as usize > L {
             return false;
         }
         let map = &mut self.edge_map;
-        for (&(_, id, _), l) in self.new_tets.iter().zip(&self.face_ids) {
-            let l = l.map(|x| x as usize);
+        let at = |a: u8, b: u8| (a as usize * L + b as usize) & (L * L - 1);
+        for (&(_, id, _), l) in self.new_tets.iter().zip(number.chunks_exact(3)) {
             for (i, j, _) in FACE_EDGES {
-                map[l[i] * L + l[j]] = id;
+                map[at(l[i], l[j])] = id;
             }
         }
-        for (&(_, id, k), l) in self.new_tets.iter().zip(&self.face_ids) {
-            let l = l.map(|x| x as usize);
+        for (&(_, id, k), l) in self.new_tets.iter().zip(number.chunks_exact(3)) {
             let tet = &sh.tets[id as usize];
             for (i, j, third) in FACE_EDGES {
-                tet.set_nbr(APEX_FACE[k as usize][third], map[l[j] * L + l[i]]);
+                tet.set_nbr(APEX_FACE[k as usize][third], map[at(l[j], l[i])]);
             }
         }
         true

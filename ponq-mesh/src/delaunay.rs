@@ -1145,6 +1145,7 @@ impl Worker {
             return false;
         }
         let map = &mut self.edge_map;
+        // The numbers are below `L`, so the mask changes no index: it spares the bounds checks.
         let at = |a: u8, b: u8| (a as usize * L + b as usize) & (L * L - 1);
         for (&(_, id, _), l) in self.new_tets.iter().zip(number.chunks_exact(3)) {
             for (i, j, _) in FACE_EDGES {

@@ -125,6 +125,12 @@ fn main() {
         .windows(2)
         .find(|w| w[0] == "--save")
         .map(|w| std::path::PathBuf::from(&w[1]));
+    if let Some(dir) = &save
+        && let Err(e) = std::fs::create_dir_all(dir)
+    {
+        eprintln!("error: --save {}: {e}", dir.display());
+        std::process::exit(2);
+    }
     let repeat = value_of("--repeat").last().copied().unwrap_or(3).max(1);
     const STANDARD: [(usize, usize); 4] = [
         (32, 80_000),
@@ -157,10 +163,7 @@ fn main() {
         let ponq = ponq_by_grid(&cad_union_samples(samples), grid);
         if let Some(dir) = &save {
             let path = dir.join(format!("synthetic_{grid}.npz"));
-            if let Err(e) = std::fs::create_dir_all(dir)
-                .map_err(|e| e.to_string())
-                .and_then(|()| io::npz::write_ponq(&path, &ponq).map_err(|e| e.to_string()))
-            {
+            if let Err(e) = io::npz::write_ponq(&path, &ponq) {
                 eprintln!("error: --save {}: {e}", path.display());
                 std::process::exit(2);
             }

@@ -107,13 +107,10 @@ impl HalfEdges {
         // In parallel only for large surfaces: a parallel call from outside the pool waits
         // for a worker to wake up, which smaller ones do not repay (see [`corner_rows`]).
         let large = rows.len() >= PARALLEL_MIN_CORNERS;
-        let opp: Vec<AtomicU32> = match (half_edges, large) {
-            (false, _) => Vec::new(),
-            (true, false) => (0..rows.len()).map(|_| AtomicU32::new(NONE)).collect(),
-            (true, true) => (0..rows.len())
-                .into_par_iter()
-                .map(|_| AtomicU32::new(NONE))
-                .collect(),
+        let opp: Vec<AtomicU32> = if half_edges {
+            collect_indexed(rows.len(), large, |_| AtomicU32::new(NONE))
+        } else {
+            Vec::new()
         };
         let bad: Vec<u32> = (0..n as u32)
             .into_par_iter()
@@ -133,19 +130,8 @@ impl HalfEdges {
         }
         // In place (the same layout): no new array.
         let opp: Vec<u32> = opp.into_iter().map(AtomicU32::into_inner).collect();
-        let degree = |v: usize| start[v + 1] - start[v];
-        let first = |v: u32| row(v).first().map_or(NONE, |o| o.h);
-        let (degree, out): (Vec<u32>, Vec<u32>) = if large {
-            (
-                (0..n).into_par_iter().map(degree).collect(),
-                (0..n as u32).into_par_iter().map(first).collect(),
-            )
-        } else {
-            (
-                (0..n).map(degree).collect(),
-                (0..n as u32).map(first).collect(),
-            )
-        };
+        let degree = collect_indexed(n, large, |v| start[v + 1] - start[v]);
+        let out = collect_indexed(n, large, |v| row(v as u32).first().map_or(NONE, |o| o.h));
         (bad, Some(Self { opp, out, degree }))
     }
 
@@ -299,6 +285,20 @@ impl HalfEdges {
     #[inline]
     pub fn degree(&self, v: u32) -> u32 {
         self.degree[v as usize]
+    }
+}
+
+/// `(0..len).map(f)` collected, in parallel when `parallel` (see [`PARALLEL_MIN_CORNERS`] for
+/// why small surfaces stay on the calling thread).
+fn collect_indexed<T: Send>(
+    len: usize,
+    parallel: bool,
+    f: impl Fn(usize) -> T + Sync + Send,
+) -> Vec<T> {
+    if parallel {
+        (0..len).into_par_iter().map(f).collect()
+    } else {
+        (0..len).map(f).collect()
     }
 }
 

@@ -240,22 +240,32 @@ fn spread3(v: u32) -> u64 {
 }
 
 /// Keys of `pts` along a Hilbert curve on a `2^10`-cell grid over their bounding box (2^10
-/// cells per side is finer than any point spacing that matters for locality). Equal points
-/// get equal keys.
-fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<u64> {
+/// cells per side is finer than any point spacing that matters for locality), each with the
+/// point's index. Equal points get equal keys.
+fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
     use rayon::prelude::*;
     const BITS: u32 = 10;
-    let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
-    if let Some(first) = pts.first() {
-        lo = *first;
-        hi = *first;
-    }
-    for p in pts {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    // The bounding box (min and max are exact, so any grouping gives the same box).
+    let (lo, hi) = pts
+        .par_iter()
+        .fold(
+            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |(lo, hi), p| {
+                (
+                    std::array::from_fn(|k| lo[k].min(p[k])),
+                    std::array::from_fn(|k| hi[k].max(p[k])),
+                )
+            },
+        )
+        .reduce(
+            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |(l1, h1), (l2, h2)| {
+                (
+                    std::array::from_fn(|k| l1[k].min(l2[k])),
+                    std::array::from_fn(|k| h1[k].max(h2[k])),
+                )
+            },
+        );
     let scale: [f64; 3] = std::array::from_fn(|k| {
         let e = hi[k] - lo[k];
         if e > 0.0 {
@@ -268,7 +278,10 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<u64> {
         let c = |k: usize| (((p[k] - lo[k]) * scale[k]) as u32).min((1 << BITS) - 1);
         hilbert_index([c(0), c(1), c(2)], BITS)
     };
-    pts.par_iter().map(key).collect()
+    pts.par_iter()
+        .enumerate()
+        .map(|(i, p)| (key(p), i as u32))
+        .collect()
 }
 
 /// `x * 2^k`, exact wherever the result is a normal number or `x` is scaled up (in two
@@ -381,10 +394,18 @@ struct Distinct {
 /// duplicates have one key, so they end up next to each other. (Before: a sort by position to
 /// merge, then a sort by key of each BRIO round; merging and ordering took 12.9 ms at best at
 /// 109k points on two threads, now 10.6, side by side.)
+///
+/// The runs of merged points are found in one pass over the sorted order (a point joins the
+/// run before it if it is at the position of the point before it, or within `merge_within` of
+/// the run's first point), but that pass reads points only where a parallel pass found the
+/// point before within twice `merge_within` (or at the same position): every point of a run
+/// is within `merge_within` of its first one, so two consecutive ones within twice that. Most
+/// inputs have no such pair, and then the vertices are the points as they are. (One pass
+/// over all the points and a renumbering pass, both on one thread: 3-4 ms of the 109k-point
+/// ordering on two threads, see `docs/meshing-history.md`.)
 fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
     use rayon::prelude::*;
-    let keys = hilbert_keys(points);
-    let mut idx: Vec<(u64, u32)> = keys.iter().zip(0u32..).map(|(&k, i)| (k, i)).collect();
+    let mut idx = hilbert_keys(points);
     // `+ 0.0` turns -0.0 into 0.0: the same position must sort as one.
     let position = |i: u32| points[i as usize].map(|c| c + 0.0);
     idx.par_sort_unstable_by(|&(ka, a), &(kb, b)| {
@@ -396,51 +417,85 @@ fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
                 .then(a.cmp(&b))
         })
     });
-    let mut group_of_point = vec![0u32; points.len()];
-    let mut group_key = Vec::new();
     let near2 = merge_within * merge_within;
-    // The first point of the current run in sorted order: near points are measured from it,
-    // so that a run never creeps along a chain of near points.
+    let same_position = |p: &[f64; 3], q: &[f64; 3]| p[0] == q[0] && p[1] == q[1] && p[2] == q[2];
+    let dist2 =
+        |r: &[f64; 3], q: &[f64; 3]| (0..3).map(|c| (r[c] - q[c]) * (r[c] - q[c])).sum::<f64>();
+    let pt = |k: usize| &points[idx[k].1 as usize];
+    // Whether sorted position k may join the run before it. (Rounding: the distances are
+    // computed to a few ulps, far inside the factor 4.5 against 4.)
+    let may_join: Vec<bool> = (0..idx.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|k| {
+            k > 0 && {
+                let (p, q) = (pt(k - 1), pt(k));
+                same_position(p, q) || (near2 > 0.0 && dist2(p, q) <= 4.5 * near2)
+            }
+        })
+        .collect();
+    // The sorted positions that join the run before them, with the run's first position.
+    let mut joins: Vec<(u32, u32)> = Vec::new();
     let mut first = 0usize;
-    for k in 0..idx.len() {
-        // The points in curve order are random reads of the input: asked for ahead.
-        if let Some(&(_, ahead)) = idx.get(k + GATHER_AHEAD) {
-            prefetch(&points[ahead as usize]);
-        }
-        let (key, i) = idx[k];
-        let q = &points[i as usize];
-        let same = k > 0 && {
-            let p = &points[idx[k - 1].1 as usize];
-            (p[0] == q[0] && p[1] == q[1] && p[2] == q[2])
-                || (near2 > 0.0 && {
-                    let r = &points[idx[first].1 as usize];
-                    (0..3).map(|c| (r[c] - q[c]) * (r[c] - q[c])).sum::<f64>() <= near2
-                })
-        };
-        if !same {
-            group_key.push(key);
+    for (k, &may) in may_join.iter().enumerate() {
+        let same = may
+            && (same_position(pt(k - 1), pt(k))
+                || (near2 > 0.0 && dist2(pt(first), pt(k)) <= near2));
+        if same {
+            joins.push((first as u32, k as u32));
+        } else {
             first = k;
         }
-        group_of_point[i as usize] = group_key.len() as u32 - 1;
     }
-    let groups = group_key.len();
-    // Number vertices by the first occurrence of each position in input order.
-    let mut group_vertex = vec![u32::MAX; groups];
-    let mut vertices = Vec::with_capacity(groups + 4);
-    let mut vertex_of_point = vec![0u32; points.len()];
-    for (i, p) in points.iter().enumerate() {
-        let g = group_of_point[i] as usize;
-        if group_vertex[g] == u32::MAX {
-            group_vertex[g] = vertices.len() as u32;
-            vertices.push(*p);
-        }
-        vertex_of_point[i] = group_vertex[g];
+    if joins.is_empty() {
+        // Every point is a vertex of its own, numbered as in the input.
+        return Distinct {
+            vertices: points.to_vec(),
+            vertex_of_point: (0..points.len() as u32).collect(),
+            hilbert: idx,
+        };
     }
-    // The groups are in curve order.
+    // Each merged run becomes one vertex, at its first point in input order (its smallest
+    // index); the others are dropped, the vertices keep their input order.
+    let mut dropped: Vec<(u32, u32)> = Vec::new();
+    for run in joins.chunk_by(|a, b| a.0 == b.0) {
+        let members = || {
+            std::iter::once(run[0].0)
+                .chain(run.iter().map(|j| j.1))
+                .map(|k| idx[k as usize].1)
+        };
+        let keep = members().min().unwrap_or(u32::MAX);
+        dropped.extend(members().filter(|&i| i != keep).map(|i| (i, keep)));
+    }
+    dropped.sort_unstable();
+    let mut vertex_of_point: Vec<u32> = (0..points.len() as u32)
+        .into_par_iter()
+        .map(|i| i - dropped.partition_point(|d| d.0 < i) as u32)
+        .collect();
+    for &(i, keep) in &dropped {
+        vertex_of_point[i as usize] = vertex_of_point[keep as usize];
+    }
+    let vertices: Vec<[f64; 3]> = points
+        .par_iter()
+        .enumerate()
+        .filter(|&(i, _)| dropped.binary_search_by_key(&(i as u32), |d| d.0).is_err())
+        .map(|(_, p)| *p)
+        .collect();
+    let mut joined = vec![false; idx.len()];
+    for &(_, k) in &joins {
+        joined[k as usize] = true;
+    }
+    // The runs in curve order, each with the key of its first point.
+    let hilbert = idx
+        .par_iter()
+        .zip(&joined)
+        .filter(|&(_, &j)| !j)
+        .map(|(&(key, i), _)| (key, vertex_of_point[i as usize]))
+        .collect();
     Distinct {
         vertices,
         vertex_of_point,
-        hilbert: group_key.into_iter().zip(group_vertex).collect(),
+        hilbert,
     }
 }
 
@@ -535,16 +590,28 @@ fn extremes_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usi
         .collect();
     extreme.sort_unstable();
     extreme.dedup();
-    let is_extreme = |v: u32| extreme.binary_search(&v).is_ok();
-    let moved: Vec<usize> = (0..order.len()).filter(|&j| is_extreme(order[j])).collect();
+    // Their places in the order (at most eight: a scan of the order in parallel, then copies
+    // of the stretches between them).
+    let moved: Vec<usize> = order
+        .par_iter()
+        .enumerate()
+        .filter(|&(_, v)| extreme.contains(v))
+        .map(|(j, _)| j)
+        .collect();
     // A round that started at `r > 0` now starts after all moved vertices and the others
     // before `r`.
     for r in rounds.iter_mut().filter(|r| **r > 0) {
         *r += moved.iter().filter(|&&j| j >= *r).count();
     }
-    let front: Vec<u32> = moved.iter().map(|&j| order[j]).collect();
-    order.retain(|&v| !is_extreme(v));
-    order.splice(0..0, front);
+    let mut moved_first = Vec::with_capacity(order.len());
+    moved_first.extend(moved.iter().map(|&j| order[j]));
+    let mut from = 0;
+    for &j in &moved {
+        moved_first.extend_from_slice(&order[from..j]);
+        from = j + 1;
+    }
+    moved_first.extend_from_slice(&order[from..]);
+    *order = moved_first;
 }
 
 impl Delaunay {
@@ -2334,6 +2401,92 @@ mod tests {
         }
     }
 
+    /// [`distinct_points`] as it was before its runs were found in parallel (2026-12-05,
+    /// fifteenth session): one pass over the sorted points, then one over the input.
+    fn distinct_points_reference(points: &[[f64; 3]], merge_within: f64) -> Distinct {
+        let mut idx = hilbert_keys(points);
+        let position = |i: u32| points[i as usize].map(|c| c + 0.0);
+        idx.sort_unstable_by(|&(ka, a), &(kb, b)| {
+            ka.cmp(&kb).then_with(|| {
+                let (p, q) = (position(a), position(b));
+                p[0].total_cmp(&q[0])
+                    .then(p[1].total_cmp(&q[1]))
+                    .then(p[2].total_cmp(&q[2]))
+                    .then(a.cmp(&b))
+            })
+        });
+        let mut group_of_point = vec![0u32; points.len()];
+        let mut group_key = Vec::new();
+        let near2 = merge_within * merge_within;
+        let mut first = 0usize;
+        for k in 0..idx.len() {
+            let (key, i) = idx[k];
+            let q = &points[i as usize];
+            let same = k > 0 && {
+                let p = &points[idx[k - 1].1 as usize];
+                (p[0] == q[0] && p[1] == q[1] && p[2] == q[2])
+                    || (near2 > 0.0 && {
+                        let r = &points[idx[first].1 as usize];
+                        (0..3).map(|c| (r[c] - q[c]) * (r[c] - q[c])).sum::<f64>() <= near2
+                    })
+            };
+            if !same {
+                group_key.push(key);
+                first = k;
+            }
+            group_of_point[i as usize] = group_key.len() as u32 - 1;
+        }
+        let mut group_vertex = vec![u32::MAX; group_key.len()];
+        let mut vertices = Vec::new();
+        let mut vertex_of_point = vec![0u32; points.len()];
+        for (i, p) in points.iter().enumerate() {
+            let g = group_of_point[i] as usize;
+            if group_vertex[g] == u32::MAX {
+                group_vertex[g] = vertices.len() as u32;
+                vertices.push(*p);
+            }
+            vertex_of_point[i] = group_vertex[g];
+        }
+        Distinct {
+            vertices,
+            vertex_of_point,
+            hilbert: group_key.into_iter().zip(group_vertex).collect(),
+        }
+    }
+
+    /// The vertices, the vertex of each point and the curve order are those of the one-pass
+    /// reference, with exact duplicates (`-0.0` against `0.0` too), chains of near points
+    /// and none at all.
+    #[test]
+    fn distinct_points_match_the_one_pass_reference() {
+        let mut rng = SplitMix(11);
+        for case in 0..60u64 {
+            let n = [0usize, 1, 2, 9, 300, 5000][case as usize % 6];
+            // Positions on a coarse lattice (many duplicates), near the lattice points (pairs
+            // and chains within the merge distance), or anywhere.
+            let step = [1e-6, 1e-3, 0.25][(case / 6) as usize % 3];
+            let merge = [0.0, 0.4e-6, 1e-6, 3e-6, 1e-3][(case / 18) as usize % 5];
+            let points: Vec<[f64; 3]> = (0..n)
+                .map(|i| {
+                    std::array::from_fn(|_| {
+                        let r = rng.next();
+                        match i % 4 {
+                            0 => (r % 8) as f64 * step - 4.0 * step,
+                            1 => (r % 8) as f64 * step + ((r >> 8) % 5) as f64 * 0.3e-6,
+                            2 => -0.0,
+                            _ => (r % 1_000_000) as f64 * 1e-6,
+                        }
+                    })
+                })
+                .collect();
+            let got = distinct_points(&points, merge);
+            let want = distinct_points_reference(&points, merge);
+            assert_eq!(got.vertices, want.vertices, "case {case}");
+            assert_eq!(got.vertex_of_point, want.vertex_of_point, "case {case}");
+            assert_eq!(got.hilbert, want.hilbert, "case {case}");
+        }
+    }
+
     /// The insertion order is the one of sorting each round of the shuffle by (Hilbert key,
     /// shuffled position), which it replaces; tested with many equal keys (ties) and
     /// duplicated points.
@@ -2372,7 +2525,7 @@ mod tests {
                 let mut round: Vec<(u64, usize, u32)> = reference[w[0]..w[1]]
                     .iter()
                     .enumerate()
-                    .map(|(j, &v)| (keys[v as usize], j, v))
+                    .map(|(j, &v)| (keys[v as usize].0, j, v))
                     .collect();
                 round.sort_unstable();
                 for (slot, r) in reference[w[0]..w[1]].iter_mut().zip(&round) {

@@ -405,18 +405,7 @@ struct Distinct {
 /// ordering on two threads, see `docs/meshing-history.md`.)
 fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
     use rayon::prelude::*;
-    let mut idx = hilbert_keys(points);
-    // `+ 0.0` turns -0.0 into 0.0: the same position must sort as one.
-    let position = |i: u32| points[i as usize].map(|c| c + 0.0);
-    idx.par_sort_unstable_by(|&(ka, a), &(kb, b)| {
-        ka.cmp(&kb).then_with(|| {
-            let (p, q) = (position(a), position(b));
-            p[0].total_cmp(&q[0])
-                .then(p[1].total_cmp(&q[1]))
-                .then(p[2].total_cmp(&q[2]))
-                .then(a.cmp(&b))
-        })
-    });
+    let idx = curve_order(points);
     let near2 = merge_within * merge_within;
     let same_position = |p: &[f64; 3], q: &[f64; 3]| p[0] == q[0] && p[1] == q[1] && p[2] == q[2];
     let dist2 =
@@ -497,6 +486,25 @@ fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
         vertex_of_point,
         hilbert,
     }
+}
+
+/// The points' Hilbert keys with their indices, sorted by (key, position, index): equal
+/// positions (`-0.0` and `0.0` as one) are next to each other.
+fn curve_order(points: &[[f64; 3]]) -> Vec<(u64, u32)> {
+    use rayon::prelude::*;
+    let mut idx = hilbert_keys(points);
+    // `+ 0.0` turns -0.0 into 0.0: the same position must sort as one.
+    let position = |i: u32| points[i as usize].map(|c| c + 0.0);
+    idx.par_sort_unstable_by(|&(ka, a), &(kb, b)| {
+        ka.cmp(&kb).then_with(|| {
+            let (p, q) = (position(a), position(b));
+            p[0].total_cmp(&q[0])
+                .then(p[1].total_cmp(&q[1]))
+                .then(p[2].total_cmp(&q[2]))
+                .then(a.cmp(&b))
+        })
+    });
+    idx
 }
 
 /// Biased randomised insertion order of `n` vertices: rounds growing eightfold (the last holds
@@ -2457,17 +2465,7 @@ mod tests {
     /// [`distinct_points`] as it was before its runs were found in parallel (2026-12-05,
     /// fifteenth session): one pass over the sorted points, then one over the input.
     fn distinct_points_reference(points: &[[f64; 3]], merge_within: f64) -> Distinct {
-        let mut idx = hilbert_keys(points);
-        let position = |i: u32| points[i as usize].map(|c| c + 0.0);
-        idx.sort_unstable_by(|&(ka, a), &(kb, b)| {
-            ka.cmp(&kb).then_with(|| {
-                let (p, q) = (position(a), position(b));
-                p[0].total_cmp(&q[0])
-                    .then(p[1].total_cmp(&q[1]))
-                    .then(p[2].total_cmp(&q[2]))
-                    .then(a.cmp(&b))
-            })
-        });
+        let idx = curve_order(points);
         let mut group_of_point = vec![0u32; points.len()];
         let mut group_key = Vec::new();
         let near2 = merge_within * merge_within;

@@ -1531,8 +1531,8 @@ impl Worker {
 }
 
 /// How many items ahead a gather through a permutation asks for (see [`prefetch`]): the
-/// output's tets from their arena slots in [`Builder::finish`], the points in curve order in
-/// [`distinct_points`]. Measured with 8, 16 and 32: the same.
+/// output's tets from their arena slots in [`Builder::finish`]. Measured with 8, 16 and 32:
+/// the same.
 const GATHER_AHEAD: usize = 16;
 
 /// Asks the CPU to bring the cache lines of `x` (at most two: `size_of::<T>() <= 64`) into

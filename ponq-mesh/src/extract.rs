@@ -40,10 +40,5 @@ pub fn extract_boundary(cx: &TetComplex, labels: &[Label]) -> (TriMesh, Vec<u32>
 
 /// [`extract_boundary`] of boundary faces already computed ([`boundary_faces`]).
 pub fn extract_faces(cx: &TetComplex, faces: Vec<[u32; 3]>) -> (TriMesh, Vec<u32>) {
-    let mut mesh = TriMesh {
-        vertices: cx.dt.vertices.clone(),
-        faces,
-    };
-    let back = mesh.remove_unreferenced_vertices();
-    (mesh, back)
+    TriMesh::of_used_vertices(&cx.dt.vertices, faces)
 }

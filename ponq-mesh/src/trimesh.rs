@@ -125,18 +125,13 @@ mod tests {
     /// over a few of many vertices, with repeats.
     #[test]
     fn of_used_vertices_is_the_mesh_without_its_unused_vertices() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = |m: u64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state % m
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(29);
         for (nv, nf) in [(1usize, 0usize), (5, 3), (100, 40), (2000, 1500)] {
             let vertices: Vec<[f64; 3]> = (0..nv).map(|i| [i as f64, -(i as f64), 0.5]).collect();
             let used = (nv as u64 / 3).max(1);
             let faces: Vec<[u32; 3]> = (0..nf)
-                .map(|_| [0; 3].map(|_| (next(used) * 3 % nv as u64) as u32))
+                .map(|_| [0; 3].map(|_| (rng.random_range(0..used) * 3 % nv as u64) as u32))
                 .collect();
             let mut all = TriMesh {
                 vertices: vertices.clone(),

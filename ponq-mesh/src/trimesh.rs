@@ -109,7 +109,10 @@ impl TriMesh {
     ///
     /// # Panics
     /// If a face index is out of range of `vertices`.
-    pub fn of_used_vertices(vertices: &[[f64; 3]], mut faces: Vec<[u32; 3]>) -> (Self, Vec<u32>) {
+    pub(crate) fn of_used_vertices(
+        vertices: &[[f64; 3]],
+        mut faces: Vec<[u32; 3]>,
+    ) -> (Self, Vec<u32>) {
         let old = number_by_first_use(&mut faces, vertices.len());
         let vertices = old.iter().map(|&v| vertices[v as usize]).collect();
         (Self { vertices, faces }, old)

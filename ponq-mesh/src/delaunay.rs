@@ -246,26 +246,15 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
     use rayon::prelude::*;
     const BITS: u32 = 10;
     // The bounding box (min and max are exact, so any grouping gives the same box).
-    let (lo, hi) = pts
-        .par_iter()
-        .fold(
-            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
-            |(lo, hi), p| {
-                (
-                    std::array::from_fn(|k| lo[k].min(p[k])),
-                    std::array::from_fn(|k| hi[k].max(p[k])),
-                )
-            },
-        )
-        .reduce(
-            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
-            |(l1, h1), (l2, h2)| {
-                (
-                    std::array::from_fn(|k| l1[k].min(l2[k])),
-                    std::array::from_fn(|k| h1[k].max(h2[k])),
-                )
-            },
-        );
+    let (lo, hi) = pts.par_iter().map(|p| (*p, *p)).reduce(
+        || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        |(l1, h1), (l2, h2)| {
+            (
+                std::array::from_fn(|k| l1[k].min(l2[k])),
+                std::array::from_fn(|k| h1[k].max(h2[k])),
+            )
+        },
+    );
     let scale: [f64; 3] = std::array::from_fn(|k| {
         let e = hi[k] - lo[k];
         if e > 0.0 {

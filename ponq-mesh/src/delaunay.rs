@@ -1634,54 +1634,46 @@ const ROTATION_BY_ORDER: [u8; 64] = {
 /// Buckets of at most this many tets are sorted by rank (see [`sort_bucket`]).
 const RANK_SORT_MAX: usize = 24;
 
-/// Bins of the key histogram [`balanced_bounds`] cuts at.
-const BALANCE_BINS: usize = 1024;
+/// The number of output tets of each sort key `0..n` (a tet's largest vertex; [`NONE`] and
+/// any other key `>= n` is not counted), in one pass over `key` shared by `parts` threads.
+fn key_counts(key: &[u32], n: u32, parts: usize) -> Vec<u32> {
+    use rayon::prelude::*;
+    let len = key.len();
+    (0..parts)
+        .into_par_iter()
+        .map(|c| {
+            let mut count = vec![0u32; n as usize];
+            for &f in &key[len * c / parts..len * (c + 1) / parts] {
+                if f < n {
+                    count[f as usize] += 1;
+                }
+            }
+            count
+        })
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            a
+        })
+        .unwrap_or_else(|| vec![0; n as usize])
+}
 
 /// Vertex bounds `0 = b_0 <= b_1 <= ... <= b_parts = n` that cut the output into `parts`
-/// ranges of sort keys (largest vertex, [`NONE`] for no output tet) holding about as many
-/// tets each, from a histogram of the keys in [`BALANCE_BINS`] bins (each part within one
-/// bin's tets of its share). Equal vertex ranges are not balanced: a tet's key is its newest
-/// vertex, and the last BRIO round, about half the vertices, makes most of the tets (59% in
-/// the upper half at 109k points). The bounds change which thread writes which part of the
-/// output, never the output.
-fn balanced_bounds(key: &[u32], n: u32, parts: usize) -> Vec<u32> {
-    use rayon::prelude::*;
-    let width = n.div_ceil(BALANCE_BINS as u32).max(1);
-    let bins = n.div_ceil(width) as usize;
-    let hist = key
-        .par_chunks(1 << 16)
-        .fold(
-            || vec![0usize; bins],
-            |mut h, chunk| {
-                for &f in chunk {
-                    if f < n {
-                        h[(f / width) as usize] += 1;
-                    }
-                }
-                h
-            },
-        )
-        .reduce(
-            || vec![0usize; bins],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
-    let total: usize = hist.iter().sum();
+/// ranges of sort keys holding about as many tets each (each part within one key's tets of
+/// its share), from `offsets` (`n + 1` entries: the tets of keys below each vertex). Equal
+/// vertex ranges are not balanced: a tet's key is its newest vertex, and the last BRIO round,
+/// about half the vertices, makes most of the tets (59% in the upper half at 109k points).
+/// The bounds change which thread writes which part of the output, never the output.
+fn balanced_bounds(offsets: &[u32], parts: usize) -> Vec<u32> {
+    let n = offsets.len() - 1;
+    let total = u64::from(offsets[n]);
     let mut bounds = Vec::with_capacity(parts + 1);
     bounds.push(0);
-    let (mut bin, mut below) = (0usize, 0usize);
     for i in 1..parts {
-        // The first bin edge with at least the first i parts' share of the tets below it.
-        let target = total * i / parts;
-        while bin < bins && below < target {
-            below += hist[bin];
-            bin += 1;
-        }
-        bounds.push((bin as u32 * width).min(n));
+        // The first vertex with at least the first i parts' share of the tets below it.
+        let target = total * i as u64 / parts as u64;
+        bounds.push(offsets.partition_point(|&o| u64::from(o) < target).min(n) as u32);
     }
-    bounds.push(n);
+    bounds.push(n as u32);
     bounds
 }
 
@@ -2113,25 +2105,12 @@ impl Builder {
         // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
-        let bounds = balanced_bounds(&key, n, parts);
-        let counts: Vec<Vec<u32>> = (0..parts)
-            .into_par_iter()
-            .map(|c| {
-                let (lo, hi) = (bounds[c], bounds[c + 1]);
-                let mut cnt = vec![0u32; (hi - lo) as usize];
-                for &f in &key {
-                    if f >= lo && f < hi {
-                        cnt[(f - lo) as usize] += 1;
-                    }
-                }
-                cnt
-            })
-            .collect();
         let mut offsets = Vec::with_capacity(n as usize + 1);
         offsets.push(0u32);
-        for &c in counts.iter().flatten() {
+        for c in key_counts(&key, n, parts) {
             offsets.push(offsets[offsets.len() - 1] + c);
         }
+        let bounds = balanced_bounds(&offsets, parts);
         // Fill the output arrays bucket by bucket (the rotated vertices and neighbour slots),
         // each thread its own vertex range; sort each small bucket; record where each slot
         // went; then map the neighbour slots to output positions.
@@ -2328,7 +2307,7 @@ mod tests {
     /// are; `NONE` keys ignored), for any number of parts, vertex counts below and above the
     /// bin count, and no key at all.
     #[test]
-    fn balanced_bounds_split_the_keys_evenly() {
+    fn key_counts_and_balanced_bounds_split_the_keys_evenly() {
         let mut rng = SplitMix(7);
         for (n, len, parts) in [
             (100_000u32, 700_000usize, 2usize),
@@ -2349,22 +2328,27 @@ mod tests {
                     }
                 })
                 .collect();
-            let b = balanced_bounds(&key, n, parts);
+            let counts = key_counts(&key, n, parts);
+            assert_eq!(counts.len(), n as usize);
+            for v in [0, n / 2, n - 1] {
+                let direct = key.iter().filter(|&&f| f == v).count();
+                assert_eq!(counts[v as usize] as usize, direct, "key {v}");
+            }
+            let mut offsets = vec![0u32];
+            for c in counts {
+                offsets.push(offsets[offsets.len() - 1] + c);
+            }
+            let b = balanced_bounds(&offsets, parts);
             assert_eq!(b.len(), parts + 1);
             assert_eq!((b[0], b[parts]), (0, n));
             assert!(b.windows(2).all(|w| w[0] <= w[1]), "{b:?}");
-            // The most keys in one bin.
-            let width = n.div_ceil(BALANCE_BINS as u32).max(1);
-            let mut per_bin = vec![0usize; BALANCE_BINS];
-            key.iter()
-                .filter(|&&f| f < n)
-                .for_each(|&f| per_bin[(f / width) as usize] += 1);
-            let bin_max = per_bin.iter().copied().max().unwrap_or(0);
+            // The most tets of one key.
+            let key_max = offsets.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0) as usize;
             let total = key.iter().filter(|&&f| f < n).count();
             for w in b.windows(2) {
                 let inside = key.iter().filter(|&&f| f >= w[0] && f < w[1]).count();
                 assert!(
-                    inside.abs_diff(total / parts) <= bin_max + parts,
+                    inside.abs_diff(total / parts) <= key_max + parts,
                     "n {n} parts {parts}: {inside} of {total} in {w:?}"
                 );
             }

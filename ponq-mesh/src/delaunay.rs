@@ -194,38 +194,63 @@ impl SplitMix {
 
 /// Index of a point on the 3D Hilbert curve of order `bits` (at most 21; Skilling's
 /// transpose method).
+#[cfg(test)]
+fn hilbert_index(x: [u32; 3], bits: u32) -> u64 {
+    hilbert_index_lanes(x.map(|c| [c]), bits)[0]
+}
+
+/// [`hilbert_index`] of `L` points at once, coordinate `k` of point `l` at `x[k][l]`.
 ///
 /// Without a branch on the coordinates' bits: they are as often set as not, and the branches
 /// of the textbook form (kept in the tests as the reference) were mispredicted half the time.
-fn hilbert_index(mut x: [u32; 3], bits: u32) -> u64 {
+/// Written lane by lane over arrays, so that the compiler keeps `L` points in one vector
+/// register (eight 32-bit lanes with AVX2, see [`hilbert_keys`]).
+#[inline(always)]
+fn hilbert_index_lanes<const L: usize>(mut x: [[u32; L]; 3], bits: u32) -> [u64; L] {
     let m = 1u32 << (bits - 1);
     let mut q = m;
     while q > 1 {
         let p = q - 1;
         for i in 0..3 {
-            // All ones where bit q of x[i] is set: then x[0] ^= p; else exchange the low
-            // bits of x[0] and x[i] (for i = 0, t is 0).
-            let set = 0u32.wrapping_sub(u32::from(x[i] & q != 0));
-            let t = (x[0] ^ x[i]) & p & !set;
-            x[0] ^= (p & set) | t;
-            x[i] ^= t;
+            for l in 0..L {
+                // All ones where bit q of x[i] is set: then x[0] ^= p; else exchange the low
+                // bits of x[0] and x[i] (for i = 0, t is 0).
+                let set = 0u32.wrapping_sub(u32::from(x[i][l] & q != 0));
+                let t = (x[0][l] ^ x[i][l]) & p & !set;
+                x[0][l] ^= (p & set) | t;
+                x[i][l] ^= t;
+            }
         }
         q >>= 1;
     }
     for i in 1..3 {
-        x[i] ^= x[i - 1];
+        for l in 0..L {
+            x[i][l] ^= x[i - 1][l];
+        }
     }
-    let mut t = 0;
+    let mut t = [0u32; L];
     let mut q = m;
     while q > 1 {
-        t ^= (q - 1) & 0u32.wrapping_sub(u32::from(x[2] & q != 0));
+        for l in 0..L {
+            t[l] ^= (q - 1) & 0u32.wrapping_sub(u32::from(x[2][l] & q != 0));
+        }
         q >>= 1;
     }
     for v in &mut x {
-        *v ^= t;
+        for l in 0..L {
+            v[l] ^= t[l];
+        }
     }
     // Interleave the bits, x[0]'s highest: spread each coordinate's bits three apart.
-    spread3(x[0]) << 2 | spread3(x[1]) << 1 | spread3(x[2])
+    std::array::from_fn(|l| spread3(x[0][l]) << 2 | spread3(x[1][l]) << 1 | spread3(x[2][l]))
+}
+
+/// Hilbert keys of order 10 of eight cells at once ([`hilbert_index_lanes`]), compiled for
+/// AVX2 (eight 32-bit lanes; the x86-64 baseline, SSE2, has four).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn hilbert_index8_avx2(x: [[u32; 8]; 3]) -> [u64; 8] {
+    hilbert_index_lanes(x, 10)
 }
 
 /// The low 21 bits of `v`, bit `b` moved to bit `3 b` (the usual magic-number spreading).
@@ -263,14 +288,35 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
             0.0
         }
     });
-    let key = |p: &[f64; 3]| {
-        let c = |k: usize| (((p[k] - lo[k]) * scale[k]) as u32).min((1 << BITS) - 1);
-        hilbert_index([c(0), c(1), c(2)], BITS)
-    };
-    pts.par_iter()
+    let cell = |p: &[f64; 3], k: usize| (((p[k] - lo[k]) * scale[k]) as u32).min((1 << BITS) - 1);
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    // Eight points at a time: the keys of 109k points took 2.4 ms on two threads one by one.
+    let mut keys = vec![(0u64, 0u32); pts.len()];
+    keys.par_chunks_mut(4096)
+        .zip(pts.par_chunks(4096))
         .enumerate()
-        .map(|(i, p)| (key(p), i as u32))
-        .collect()
+        .for_each(|(c, (out, pts))| {
+            let base = c * 4096;
+            for (j, (out, pts)) in out.chunks_mut(8).zip(pts.chunks(8)).enumerate() {
+                let x: [[u32; 8]; 3] = std::array::from_fn(|k| {
+                    std::array::from_fn(|l| pts.get(l).map_or(0, |p| cell(p, k)))
+                });
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: the CPU has AVX2 (`avx2` was detected).
+                let h = if avx2 {
+                    unsafe { hilbert_index8_avx2(x) }
+                } else {
+                    hilbert_index_lanes(x, BITS)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let h = hilbert_index_lanes(x, BITS);
+                for (l, o) in out.iter_mut().enumerate() {
+                    *o = (h[l], (base + 8 * j + l) as u32);
+                }
+            }
+        });
+    keys
 }
 
 /// `x * 2^k`, exact wherever the result is a normal number or `x` is scaled up (in two
@@ -2393,6 +2439,48 @@ mod tests {
             }
         }
         h
+    }
+
+    /// The keys of eight points at once are the keys of each point (with and without AVX2),
+    /// and [`hilbert_keys`] gives every point its index and the key of its cell.
+    #[test]
+    fn hilbert_keys_in_lanes_are_the_keys_of_each_point() {
+        let mut rng = SplitMix(11);
+        for _ in 0..20_000 {
+            let x: [[u32; 8]; 3] =
+                std::array::from_fn(|_| std::array::from_fn(|_| rng.next() as u32 & 1023));
+            let each: [u64; 8] = std::array::from_fn(|l| hilbert_index(x.map(|c| c[l]), 10));
+            assert_eq!(hilbert_index_lanes(x, 10), each, "{x:?}");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2.
+                assert_eq!(unsafe { hilbert_index8_avx2(x) }, each, "{x:?}");
+            }
+        }
+        for n in [1usize, 7, 8, 9, 4095, 4096, 4097, 20_003] {
+            let pts: Vec<[f64; 3]> = (0..n)
+                .map(|_| [0; 3].map(|_: u8| (rng.next() >> 11) as f64 / (1u64 << 53) as f64 - 0.3))
+                .collect();
+            let keys = hilbert_keys(&pts);
+            assert_eq!(keys.len(), n);
+            let lo: [f64; 3] =
+                std::array::from_fn(|k| pts.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min));
+            let hi: [f64; 3] =
+                std::array::from_fn(|k| pts.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max));
+            for (i, (&(key, at), p)) in keys.iter().zip(&pts).enumerate() {
+                assert_eq!(at as usize, i);
+                let cell = |k: usize| {
+                    let e = hi[k] - lo[k];
+                    let scale = if e > 0.0 { 1023.0 / e } else { 0.0 };
+                    (((p[k] - lo[k]) * scale) as u32).min(1023)
+                };
+                assert_eq!(
+                    key,
+                    hilbert_index([cell(0), cell(1), cell(2)], 10),
+                    "n {n} point {i}"
+                );
+            }
+        }
     }
 
     /// The branchless Hilbert index is the textbook one, and a bijection on a small grid

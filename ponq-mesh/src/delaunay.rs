@@ -349,10 +349,13 @@ struct ExactRange {
 
 impl ExactRange {
     fn of(points: &[[f64; 3]]) -> Self {
+        use rayon::prelude::*;
+        // In parallel: the largest of finite numbers is the same in any grouping.
         let m = points
-            .iter()
-            .flat_map(|p| p.iter())
-            .fold(0.0f64, |m, x| m.max(x.abs()));
+            .par_iter()
+            .with_min_len(4096)
+            .map(|p| p[0].abs().max(p[1].abs()).max(p[2].abs()))
+            .reduce(|| 0.0f64, f64::max);
         if m == 0.0 {
             return Self {
                 k: 0,
@@ -612,19 +615,27 @@ fn extremes_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usi
         }
     };
     let none = [(f64::NEG_INFINITY, u32::MAX); 8];
+    // Each fold sees its points in increasing index order, so a strictly larger value is
+    // the only one to take there (without a branch: eight selects per point); the reduce
+    // breaks ties between folds by index.
     let best = vertices
         .par_iter()
+        .with_min_len(4096)
         .enumerate()
         .fold(
-            || none,
-            |mut acc, (i, p)| {
-                for (d, b) in acc.iter_mut().enumerate() {
+            || ([f64::NEG_INFINITY; 8], [u32::MAX; 8]),
+            |(mut value, mut index), (i, p)| {
+                for d in 0..8 {
                     let s = |k: usize| if (d >> k) & 1 == 1 { p[k] } else { -p[k] };
-                    *b = better(*b, (s(0) + s(1) + s(2), i as u32));
+                    let v = s(0) + s(1) + s(2);
+                    let take = v > value[d];
+                    value[d] = if take { v } else { value[d] };
+                    index[d] = if take { i as u32 } else { index[d] };
                 }
-                acc
+                (value, index)
             },
         )
+        .map(|(value, index)| std::array::from_fn(|d| (value[d], index[d])))
         .reduce(|| none, |a, b| std::array::from_fn(|d| better(a[d], b[d])));
     let mut extreme: Vec<u32> = best
         .iter()
@@ -703,7 +714,11 @@ impl Delaunay {
                 points.len()
             )));
         }
-        if let Some(i) = points.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+        if let Some(i) = points
+            .par_iter()
+            .with_min_len(4096)
+            .position_first(|p| p.iter().any(|c| !c.is_finite()))
+        {
             return Err(Error::InvalidInput(format!(
                 "point {i} = {:?} is not finite",
                 points[i]

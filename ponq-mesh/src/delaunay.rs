@@ -1025,8 +1025,6 @@ struct Worker {
     /// Cavity tets still to look around, each with the face it was entered through.
     stack: Vec<(u32, u8)>,
     cavity: Vec<u32>,
-    /// Tets stamped by the current insertion: the cavity and its neighbours.
-    stamped: Vec<u32>,
     /// Slots locked by the current insertion (parallel phase).
     held: Vec<u32>,
     boundary: Vec<(u32, u8, u32, u8)>,
@@ -1062,7 +1060,6 @@ impl Worker {
             rng: SplitMix(seed),
             stack: Vec::new(),
             cavity: Vec::new(),
-            stamped: Vec::new(),
             held: Vec::new(),
             boundary: Vec::new(),
             new_tets: Vec::new(),
@@ -1342,22 +1339,18 @@ impl Worker {
         }
     }
 
-    /// Undoes the stamps and locks of a failed insertion.
+    /// Undoes the stamps and locks of a failed insertion. Its stamps are on the tets of the
+    /// cavity found so far, on those still to look around (the stack) and on the tets next to
+    /// them (the boundary): a neighbour is stamped only after it is locked, and then goes to
+    /// the stack or to the boundary. (A list of the stamped tets kept as they were stamped:
+    /// a store per conflict test.)
     fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
-        if PAR {
-            for &t in &self.stamped {
-                sh.tets[t as usize].set_mark(NO_STAMP);
-            }
-            self.unlock_all::<PAR>(sh);
-        } else {
-            // One thread (no locks) backs off only once the cavity is complete: its stamps
-            // are on the cavity and on the tets next to it.
-            let next_to = self.boundary.iter().map(|b| b.2).filter(|&t| t != NONE);
-            for t in self.cavity.iter().copied().chain(next_to) {
-                sh.tets[t as usize].set_mark(NO_STAMP);
-            }
+        let next_to = self.boundary.iter().map(|b| b.2).filter(|&t| t != NONE);
+        let pending = self.stack.iter().map(|e| e.0);
+        for t in self.cavity.iter().copied().chain(pending).chain(next_to) {
+            sh.tets[t as usize].set_mark(NO_STAMP);
         }
-        self.stamped.clear();
+        self.unlock_all::<PAR>(sh);
         fail
     }
 
@@ -1405,8 +1398,6 @@ impl Worker {
         self.cavity.clear();
         self.boundary.clear();
         self.stack.clear();
-        self.stamped.clear();
-        self.stamped.push(t);
         // Each stack entry keeps the face it was entered through (4: none), which leads back
         // into the cavity and needs no look.
         self.stack.push((t, 4));
@@ -1415,8 +1406,7 @@ impl Worker {
             self.cavity.push(c);
             let cn = sh.tets[c as usize].nbrs();
             // Touch the four neighbours together so that their cache misses overlap.
-            let marks_seen =
-                cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.mark.load(Relaxed)));
+            let _touch = cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.mark.load(Relaxed)));
             // The other faces: three after the entry face, or all four of the first tet
             // (a count instead of a skip, which would be a branch on the data).
             let (first, count) = if entry == 4 { (0, 4) } else { (entry + 1, 3) };
@@ -1431,14 +1421,9 @@ impl Worker {
                 let state = if nb == NONE {
                     Neighbour::Hull
                 } else {
-                    if PAR {
-                        if !self.try_lock::<PAR>(sh, nb) {
-                            return Err(self.back_off::<PAR>(sh, Fail::Busy));
-                        }
-                        // Stamped below unless it is already (a failed attempt at `v` left
-                        // no stamp: `back_off` clears them).
-                        let seen = marks_seen[k as usize];
-                        push_if(&mut self.stamped, nb, seen != in_cav && seen != not_cav);
+                    // (One thread takes no locks: `try_lock::<false>` is `true`.)
+                    if !self.try_lock::<PAR>(sh, nb) {
+                        return Err(self.back_off::<PAR>(sh, Fail::Busy));
                     }
                     let mark = sh.tets[nb as usize].mark();
                     if mark == in_cav {
@@ -1572,7 +1557,6 @@ impl Worker {
         self.last = self.new_tets[0].1;
         // Let go: the cavity slots (reused or dead), their neighbours, the new slots.
         self.unlock_all::<PAR>(sh);
-        self.stamped.clear();
         Ok(())
     }
 }

@@ -192,14 +192,14 @@ impl SplitMix {
     }
 }
 
-/// Index of a point on the 3D Hilbert curve of order `bits` (at most 21; Skilling's
-/// transpose method).
+/// [`hilbert_index_lanes`] of one point.
 #[cfg(test)]
 fn hilbert_index(x: [u32; 3], bits: u32) -> u64 {
     hilbert_index_lanes(x.map(|c| [c]), bits)[0]
 }
 
-/// [`hilbert_index`] of `L` points at once, coordinate `k` of point `l` at `x[k][l]`.
+/// Indices of `L` points on the 3D Hilbert curve of order `bits` (at most 21; Skilling's
+/// transpose method), coordinate `k` of point `l` at `x[k][l]`.
 ///
 /// Without a branch on the coordinates' bits: they are as often set as not, and the branches
 /// of the textbook form (kept in the tests as the reference) were mispredicted half the time.
@@ -245,12 +245,12 @@ fn hilbert_index_lanes<const L: usize>(mut x: [[u32; L]; 3], bits: u32) -> [u64;
     std::array::from_fn(|l| spread3(x[0][l]) << 2 | spread3(x[1][l]) << 1 | spread3(x[2][l]))
 }
 
-/// Hilbert keys of order 10 of eight cells at once ([`hilbert_index_lanes`]), compiled for
-/// AVX2 (eight 32-bit lanes; the x86-64 baseline, SSE2, has four).
+/// [`hilbert_index_lanes`] of eight cells, compiled for AVX2 (eight 32-bit lanes; the x86-64
+/// baseline, SSE2, has four).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn hilbert_index8_avx2(x: [[u32; 8]; 3]) -> [u64; 8] {
-    hilbert_index_lanes(x, 10)
+fn hilbert_index8_avx2(x: [[u32; 8]; 3], bits: u32) -> [u64; 8] {
+    hilbert_index_lanes(x, bits)
 }
 
 /// The low 21 bits of `v`, bit `b` moved to bit `3 b` (the usual magic-number spreading).
@@ -305,7 +305,7 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: the CPU has AVX2 (`avx2` was detected).
                 let h = if avx2 {
-                    unsafe { hilbert_index8_avx2(x) }
+                    unsafe { hilbert_index8_avx2(x, BITS) }
                 } else {
                     hilbert_index_lanes(x, BITS)
                 };
@@ -2458,7 +2458,7 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU has AVX2.
-                assert_eq!(unsafe { hilbert_index8_avx2(x) }, each, "{x:?}");
+                assert_eq!(unsafe { hilbert_index8_avx2(x, 10) }, each, "{x:?}");
             }
         }
         for n in [1usize, 7, 8, 9, 4095, 4096, 4097, 20_003] {

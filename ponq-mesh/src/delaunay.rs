@@ -2125,7 +2125,7 @@ impl Builder {
         let arena = &self.tets[..self.used];
         let rank = &self.rank;
         // The sort key of each output tet (its largest vertex); NONE for free slots and tets
-        // of the super-tetrahedron. The passes below read this array, not the 40-byte tets.
+        // of the super-tetrahedron. The passes below read this array, not the 36-byte tets.
         let key: Vec<u32> = arena
             .par_iter()
             .map(|tet| {

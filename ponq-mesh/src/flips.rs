@@ -88,9 +88,25 @@ struct VertexData<'a> {
     quadrics: &'a [Quadric],
     normals: &'a [[f64; 3]],
     index: Option<&'a [u32]>,
+    /// The CPU has AVX2 ([`VertexData::quadric_error`]). Only [`VertexData::new`] sets it,
+    /// by detection: once per flip pass, not at every edge.
+    avx2: bool,
 }
 
-impl VertexData<'_> {
+impl<'a> VertexData<'a> {
+    fn new(quadrics: &'a [Quadric], normals: &'a [[f64; 3]], index: Option<&'a [u32]>) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        Self {
+            quadrics,
+            normals,
+            index,
+            avx2,
+        }
+    }
+
     #[inline]
     fn slot(&self, w: u32) -> usize {
         self.index.map_or(w, |ix| ix[w as usize]) as usize
@@ -104,6 +120,23 @@ impl VertexData<'_> {
     #[inline]
     fn normal(&self, w: u32) -> [f64; 3] {
         self.normals[self.slot(w)]
+    }
+
+    /// The four quadrics of a flip's vertices at `x`: `((e_0 + e_1) + e_2) + e_3` with
+    /// `e_l = max(Q_l(x), 0)`. Where the CPU has AVX2, one quadric per lane of a vector register
+    /// ([`error_at_avx2`]): the same bits as [`Quadric::eval`] one by one. Measured at 99k
+    /// points: the flips' first candidate pass evaluates ~1.7M quadrics, ~5 ms of its ~9 on two
+    /// threads.
+    #[inline]
+    fn quadric_error(&self, q: [&Quadric; 4], x: [f64; 3]) -> f64 {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if self.avx2 {
+                // SAFETY: the CPU has AVX2 (`avx2` is only set where it does).
+                return unsafe { error_at_avx2(q, x) };
+            }
+        }
+        error_at_scalar(q, x)
     }
 }
 
@@ -167,56 +200,25 @@ fn quadric_test(mesh: &TriMesh, data: VertexData, noise: f64, [u, v, a, b]: [u32
             0.5 * (p[2] + q[2]),
         ]
     };
-    let quadrics = QuadricLanes::new([u, v, a, b].map(|w| data.quadric(w)));
+    let quadrics = [u, v, a, b].map(|w| data.quadric(w));
     // The old diagonal first: on flat regions (most edges) its error is noise, and the new
     // one's is not needed.
-    let e_old = quadrics.error_at(mid(u, v));
+    let e_old = data.quadric_error(quadrics, mid(u, v));
     // The anisotropies last: an eigen-decomposition each, for the few edges that pass.
     let smooth = |w: u32| data.quadric(w).anisotropy() <= MAX_DIAGONAL_ANISOTROPY;
-    e_old > noise && quadrics.error_at(mid(a, b)) < QUADRIC_FACTOR * e_old && smooth(u) && smooth(v)
+    e_old > noise
+        && data.quadric_error(quadrics, mid(a, b)) < QUADRIC_FACTOR * e_old
+        && smooth(u)
+        && smooth(v)
 }
 
-/// The four quadrics of a flip's vertices, evaluated together: `sum_l max(Q_l(x), 0)`.
-/// On x86-64 CPUs with AVX2, one quadric per lane of a vector register
-/// ([`QuadricLanes::error_at`]); the same bits as [`Quadric::eval`] one by one.
-struct QuadricLanes<'a> {
-    q: [&'a Quadric; 4],
-    #[cfg(target_arch = "x86_64")]
-    avx2: bool,
-}
-
-impl<'a> QuadricLanes<'a> {
-    #[inline]
-    fn new(q: [&'a Quadric; 4]) -> Self {
-        Self {
-            q,
-            #[cfg(target_arch = "x86_64")]
-            avx2: std::arch::is_x86_feature_detected!("avx2"),
-        }
-    }
-
-    /// `((e_0 + e_1) + e_2) + e_3` with `e_l = max(Q_l(x), 0)`. Measured at 99k points: the
-    /// flips' first candidate pass evaluates ~1.7M quadrics, ~5 ms of its ~9 on two threads.
-    #[inline]
-    fn error_at(&self, x: [f64; 3]) -> f64 {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if self.avx2 {
-                // SAFETY: the CPU has AVX2 (`avx2` is only set when it does).
-                return unsafe { error_at_avx2(self.q, x) };
-            }
-        }
-        error_at_scalar(self.q, x)
-    }
-}
-
-/// [`QuadricLanes::error_at`] one quadric at a time.
+/// [`VertexData::quadric_error`] one quadric at a time.
 fn error_at_scalar(q: [&Quadric; 4], x: [f64; 3]) -> f64 {
     let e = q.map(|q| q.eval(x).max(0.0));
     ((e[0] + e[1]) + e[2]) + e[3]
 }
 
-/// [`QuadricLanes::error_at`] with one quadric per lane. Every lane does [`Quadric::eval`]'s
+/// [`VertexData::quadric_error`] with one quadric per lane. Every lane does [`Quadric::eval`]'s
 /// operations in its order: nalgebra sums a row of `A x` as `(a_i0 x_0 + a_i1 x_1) + a_i2 x_2`
 /// and a 3-vector dot product likewise, then `(x.Ax - 2 b.x) + c`; no fused operations. So the
 /// result is the scalar one's to the bit, up to the sign of a zero (tested). Why by hand: no
@@ -724,11 +726,7 @@ pub fn align_creases(
     if quadrics.len() != mesh.vertices.len() || normals.len() != mesh.vertices.len() {
         return FlipStats::default();
     }
-    let data = VertexData {
-        quadrics,
-        normals,
-        index: None,
-    };
+    let data = VertexData::new(quadrics, normals, None);
     align(mesh, data, h, None)
 }
 
@@ -764,11 +762,7 @@ pub(crate) fn align_creases_with(
     if index.len() != mesh.vertices.len() || index.iter().any(|&i| i as usize >= len) {
         return FlipStats::default();
     }
-    let data = VertexData {
-        quadrics,
-        normals,
-        index: Some(index),
-    };
+    let data = VertexData::new(quadrics, normals, Some(index));
     align(mesh, data, h, half_edges)
 }
 
@@ -831,6 +825,7 @@ mod tests {
     fn quadric_lanes_match_the_scalar_sum() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(17);
         let mut checked_lanes = false;
+        let data = VertexData::new(&[], &[], None);
         for i in 0..300_000u32 {
             let mut g = || {
                 let e: i32 = rng.random_range(-30..30);
@@ -848,7 +843,7 @@ mod tests {
             let x = [g(), g(), g()];
             let refs = [&q[0], &q[1], &q[2], &q[3]];
             let want = refs.iter().map(|q| q.eval(x).max(0.0)).sum::<f64>();
-            let got = QuadricLanes::new(refs).error_at(x);
+            let got = data.quadric_error(refs, x);
             assert!(
                 got == want && (got != 0.0 || want == 0.0),
                 "{q:?} {x:?}: {got} vs {want}"
@@ -904,11 +899,7 @@ mod tests {
         let mesh = crease_quad(1.0);
         let normals = vec![[0.0, 0.0, 1.0]; 4];
         let test = |q: [Quadric; 4]| {
-            let data = VertexData {
-                quadrics: &q,
-                normals: &normals,
-                index: None,
-            };
+            let data = VertexData::new(&q, &normals, None);
             quadric_test(&mesh, data, noise_level(32.0 * 32.0), [0, 1, 2, 3])
         };
         assert!(test([pz, py, crease, crease]));
@@ -943,11 +934,7 @@ mod tests {
         let normals = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, s, s], [0.0, s, s]];
         let flips = |d: f64| {
             let mesh = crease_quad(d);
-            let data = VertexData {
-                quadrics: &q,
-                normals: &normals,
-                index: None,
-            };
+            let data = VertexData::new(&q, &normals, None);
             let h = 32.0 * 32.0;
             quadric_test(&mesh, data, noise_level(h), [0, 1, 2, 3])
                 && lowers_score(&mesh, data, h, [0, 1, 2], [1, 0, 3])
@@ -1057,11 +1044,7 @@ mod tests {
             for banned in &banned_sets {
                 let (mut m1, mut m2) = (mesh.clone(), mesh.clone());
                 let (mut s1, mut s2) = (FlipStats::default(), FlipStats::default());
-                let data = VertexData {
-                    quadrics: &q,
-                    normals: &n,
-                    index: None,
-                };
+                let data = VertexData::new(&q, &n, None);
                 // Half the runs on half-edges built beforehand (as the mesher passes them).
                 let prebuilt = (seed % 2 == 0)
                     .then(|| HalfEdges::new(&mesh.faces, mesh.vertices.len()))

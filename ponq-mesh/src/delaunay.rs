@@ -37,6 +37,8 @@ use crate::predicates::{
     collinear, in_conflict_past_static, insphere_static_lanes, orient3d, orient3d_bounded,
     static_insphere_bound, static_orient_bound,
 };
+#[cfg(target_arch = "x86_64")]
+use crate::predicates::{insphere_static4_avx2, orient3d_faces_avx2};
 
 /// The sizes tried for the super-tetrahedron, in extents of the input, smallest first.
 ///
@@ -978,6 +980,26 @@ impl Shared<'_> {
         orient3d_bounded(q[0], q[1], q[2], q[3], eps)
     }
 
+    /// The static conflict tests of four tets (by their vertices) against vertex `v`, one per
+    /// lane ([`insphere_static_lanes`]); with `AVX2` ([`insphere_static4_avx2`]) the points go
+    /// from `pos` into the lanes with no copy in between. The same bits either way.
+    #[inline(always)]
+    fn conflict_lanes<const AVX2: bool>(
+        &self,
+        ids: &[[u32; 4]; 4],
+        v: u32,
+        eps: &[f64; 4],
+    ) -> ([i32; 4], [f64; 4]) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is set only by `Worker::insert_avx2`, which runs only where the
+            // CPU has AVX2.
+            return unsafe { insphere_static4_avx2(self.pos, ids, self.p(v), eps) };
+        }
+        let pts = ids.map(|tv| tv.map(|x| *self.p(x)));
+        insphere_static_lanes(&pts, self.p(v), eps)
+    }
+
     /// Whether tet `tv` is in conflict with vertex `v` (its circumsphere strictly contains
     /// `v`, ties broken symbolically), once the static bound of [`insphere_static_lanes`] has
     /// not decided, from the determinant it computed (rare: ties and tets with a vertex of the
@@ -1136,7 +1158,34 @@ impl Worker {
     /// Stochastic visibility walk from `t` towards `p`; returns the tet where no face sees
     /// `p` from behind. In parallel the tets are read without locks: another worker may be
     /// changing them, so the result is only a candidate (see [`Worker::locate`]).
-    fn walk<const PAR: bool>(&mut self, sh: &Shared, mut t: u32, p: &[f64; 3]) -> Option<u32> {
+    fn walk<const PAR: bool>(&mut self, sh: &Shared, t: u32, p: &[f64; 3]) -> Option<u32> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if self.avx2 {
+                // SAFETY: the CPU has AVX2 (`avx2` is only set when it does).
+                return unsafe { self.walk_avx2::<PAR>(sh, t, p) };
+            }
+        }
+        self.walk_body::<PAR, false>(sh, t, p)
+    }
+
+    /// [`Worker::walk`] with AVX2: the four faces of a tet are tested together
+    /// ([`orient3d_faces_avx2`]), then the first face in the walk's random order that sees
+    /// `p` from behind is taken without a branch per face (each face's sign goes either way
+    /// about as often). The same faces are chosen as one by one, so the same walk.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn walk_avx2<const PAR: bool>(&mut self, sh: &Shared, t: u32, p: &[f64; 3]) -> Option<u32> {
+        self.walk_body::<PAR, true>(sh, t, p)
+    }
+
+    #[inline(always)]
+    fn walk_body<const PAR: bool, const AVX2: bool>(
+        &mut self,
+        sh: &Shared,
+        mut t: u32,
+        p: &[f64; 3],
+    ) -> Option<u32> {
         let mut prev = NONE;
         let max_steps = if PAR {
             (64 + 4 * sh.tets.len()).min(1 << 16)
@@ -1147,6 +1196,38 @@ impl Worker {
             let tet = &sh.tets[t as usize];
             let (tv, tn) = (tet.verts(), tet.nbrs());
             let r = (self.rng.next() & 3) as usize;
+            #[cfg(target_arch = "x86_64")]
+            if AVX2 {
+                // The faces the walk may cross: not the hull, not back.
+                let open = (0..4).fold(0u32, |m, k| {
+                    m | (((tn[k] != NONE) & (tn[k] != prev)) as u32) << k
+                });
+                let eps = if sh.real(tv) {
+                    sh.static_orient_eps
+                } else {
+                    f64::INFINITY
+                };
+                // SAFETY: `AVX2` is set only by `walk_avx2`, which runs only where the CPU
+                // has AVX2.
+                let (negative, undecided) =
+                    unsafe { orient3d_faces_avx2(tv.map(|x| sh.p(x)), p, eps) };
+                // With an open face undecided, one by one below (rare: ties, the hull).
+                if undecided & open == 0 {
+                    let seen = negative & open;
+                    // The faces in the order r, r + 1, ...: bit j is face (r + j) & 3.
+                    let rotated = ((seen >> r) | (seen << (4 - r))) & 0xF;
+                    if rotated == 0 {
+                        debug_assert!(
+                            PAR || (0..4).all(|k| sh.face_sees(tv, k, p) >= 0),
+                            "the walk ended outside tet {t}"
+                        );
+                        return Some(t);
+                    }
+                    prev = t;
+                    t = tn[(r + rotated.trailing_zeros() as usize) & 3];
+                    continue;
+                }
+            }
             let mut next = NONE;
             for j in 0..4 {
                 let k = (r + j) & 3;
@@ -1366,7 +1447,7 @@ impl Worker {
                 return unsafe { self.insert_avx2::<PAR>(sh, v) };
             }
         }
-        self.insert_body::<PAR>(sh, v)
+        self.insert_body::<PAR, false>(sh, v)
     }
 
     /// [`Worker::insert`] with AVX2: the cavity search's conflict tests
@@ -1383,11 +1464,12 @@ impl Worker {
         sh: &Shared,
         v: u32,
     ) -> std::result::Result<(), Fail> {
-        self.insert_body::<PAR>(sh, v)
+        self.insert_body::<PAR, true>(sh, v)
     }
 
+    /// The insertion; `AVX2` only where the CPU has it (see [`Shared::conflict_lanes`]).
     #[inline(always)]
-    fn insert_body<const PAR: bool>(
+    fn insert_body<const PAR: bool, const AVX2: bool>(
         &mut self,
         sh: &Shared,
         v: u32,
@@ -1413,7 +1495,9 @@ impl Worker {
             // First the neighbours' locks and marks; the conflict tests of the neighbours
             // that need one then run together ([`insphere_static_lanes`]).
             let mut todo = [(NONE, 0u8, Neighbour::InCavity); 4];
-            let mut pts = [[[0.0f64; 3]; 4]; 4];
+            // Lane r: the vertices of the neighbour to test (vertex 0's point in a lane without
+            // a test: any point, its answer is not read).
+            let mut ids = [[0u32; 4]; 4];
             let mut eps = [f64::INFINITY; 4];
             for r in 0..count {
                 let k = (first + r) & 3;
@@ -1432,9 +1516,7 @@ impl Worker {
                         Neighbour::Known
                     } else {
                         let tv = sh.tets[nb as usize].verts();
-                        for q in 0..4 {
-                            pts[r as usize][q] = *sh.p(tv[q]);
-                        }
+                        ids[r as usize] = tv;
                         if sh.real(tv) {
                             eps[r as usize] = sh.static_eps;
                         }
@@ -1443,7 +1525,7 @@ impl Worker {
                 };
                 todo[r as usize] = (nb, k, state);
             }
-            let (signs, dets) = insphere_static_lanes(&pts, sh.p(v), &eps);
+            let (signs, dets) = sh.conflict_lanes::<AVX2>(&ids, v, &eps);
             for r in 0..count as usize {
                 let (nb, k, state) = todo[r];
                 if state == Neighbour::Hull {

@@ -82,6 +82,71 @@ pub fn orient3d_bounded(
     orient3d_exact(a, b, c, d)
 }
 
+/// The static filter of [`orient3d_bounded`] for the four faces of tet `t` against point `p`,
+/// one per lane, with AVX2: lane `k` is the orientation of `t` with its vertex `k` replaced by
+/// `p` (what a visibility walk asks of each face). Returns two masks, bit `k` for lane `k`:
+/// decided negative, and not decided (`|det| <= eps`: [`orient3d_bounded`] goes on from
+/// there). Every lane does [`orient3d_bounded`]'s operations in its order (no fused
+/// operations), so a decided lane is its answer (tested). Why by hand: one face after the
+/// other, the walk branches on each sign, which goes either way about as often.
+///
+/// # Safety
+/// The CPU must have AVX2. (Inlined into a function compiled for AVX2, the intrinsics become
+/// single instructions; elsewhere each is a call.)
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub unsafe fn orient3d_faces_avx2(t: [&[f64; 3]; 4], p: &[f64; 3], eps: f64) -> (u32, u32) {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's CPU has AVX2 (this function's contract).
+    unsafe {
+        // Coordinate `i` of the lanes' points `q0..q3`: `t`'s, with `p` in lane `k` of `qk`.
+        macro_rules! lanes {
+            ($q:expr, $i:expr) => {{
+                let tq = _mm256_set1_pd(t[$q][$i]);
+                let pq = _mm256_set1_pd(p[$i]);
+                _mm256_blend_pd::<{ 1 << $q }>(tq, pq)
+            }};
+        }
+        macro_rules! sub {
+            ($x:expr, $y:expr) => {
+                _mm256_sub_pd($x, $y)
+            };
+        }
+        macro_rules! mul {
+            ($x:expr, $y:expr) => {
+                _mm256_mul_pd($x, $y)
+            };
+        }
+        let (ax, ay, az) = (lanes!(0, 0), lanes!(0, 1), lanes!(0, 2));
+        let (bx, by, bz) = (
+            sub!(lanes!(1, 0), ax),
+            sub!(lanes!(1, 1), ay),
+            sub!(lanes!(1, 2), az),
+        );
+        let (cx, cy, cz) = (
+            sub!(lanes!(2, 0), ax),
+            sub!(lanes!(2, 1), ay),
+            sub!(lanes!(2, 2), az),
+        );
+        let (dx, dy, dz) = (
+            sub!(lanes!(3, 0), ax),
+            sub!(lanes!(3, 1), ay),
+            sub!(lanes!(3, 2), az),
+        );
+        // bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx)
+        let m1 = sub!(mul!(cy, dz), mul!(cz, dy));
+        let m2 = sub!(mul!(cx, dz), mul!(cz, dx));
+        let m3 = sub!(mul!(cx, dy), mul!(cy, dx));
+        let det = _mm256_add_pd(sub!(mul!(bx, m1), mul!(by, m2)), mul!(bz, m3));
+        let above = _mm256_cmp_pd::<_CMP_GT_OQ>(det, _mm256_set1_pd(eps));
+        let below = _mm256_cmp_pd::<_CMP_LT_OQ>(det, _mm256_set1_pd(-eps));
+        let decided = _mm256_movemask_pd(_mm256_or_pd(above, below)) as u32;
+        // A decided lane's sign is its determinant's.
+        let negative = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(det, _mm256_setzero_pd()));
+        (negative as u32 & decided, !decided & 0xF)
+    }
+}
+
 /// `1` for a positive, `-1` for a negative number (called on decided, non-zero values only),
 /// without a branch.
 #[inline(always)]
@@ -162,6 +227,140 @@ pub fn insphere_static_lanes<const L: usize>(
         dets[l] = det;
     }
     (out, dets)
+}
+
+/// [`insphere_static_lanes`] for four tets given by vertex numbers into `pos`, with AVX2:
+/// the points go from `pos` straight into the lanes (x and y of a point by one 16-byte load,
+/// two shuffles per register of four; z one by one), with no copy into an array of points
+/// first, and the answers come from comparisons in the lanes. Every lane does
+/// [`insphere_det`]'s operations in its order (no fused operations), so the results are
+/// [`insphere_static_lanes`]' to the bit (tested). Why by hand: the cavity search of the
+/// Delaunay (`crate::delaunay`) runs this once per cavity tet, and the compiler built the
+/// plain loop's lanes from scalars (a broadcast and a blend per coordinate) after a copy of
+/// the points; a first version that took the answers lane by lane compiled to a branch per
+/// lane on the sign, mispredicted half the time (insertion 12% slower than before it).
+///
+/// # Safety
+/// The CPU must have AVX2. (Inlined into a function compiled for AVX2, the intrinsics become
+/// single instructions; elsewhere each is a call.)
+///
+/// # Panics
+/// If a vertex number is out of range of `pos`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub unsafe fn insphere_static4_avx2(
+    pos: &[[f64; 3]],
+    ids: &[[u32; 4]; 4],
+    e: &[f64; 3],
+    eps: &[f64; 4],
+) -> ([i32; 4], [f64; 4]) {
+    // SAFETY: the CPU has AVX2 (this function's contract); the loads read two of
+    // the three coordinates of points of `pos` (bounds-checked), the store four `f64` into
+    // `dets`.
+    unsafe {
+        use std::arch::x86_64::*;
+        // Straight-line code and macros: closures in AVX2 code are not always inlined (see
+        // `flips::error_at_avx2`).
+        let (ex, ey, ez) = (
+            _mm256_set1_pd(e[0]),
+            _mm256_set1_pd(e[1]),
+            _mm256_set1_pd(e[2]),
+        );
+        // Vertex `q` of the four lanes: x, y and z each in one register (lane l: tet l), minus `e`.
+        macro_rules! vertex {
+            ($q:expr) => {{
+                let (p0, p1, p2, p3) = (
+                    &pos[ids[0][$q] as usize],
+                    &pos[ids[1][$q] as usize],
+                    &pos[ids[2][$q] as usize],
+                    &pos[ids[3][$q] as usize],
+                );
+                // Each pointer is to a `[f64; 3]`, of which the loads read the first two.
+                let (xy0, xy1, xy2, xy3) = (
+                    _mm_loadu_pd(p0.as_ptr()),
+                    _mm_loadu_pd(p1.as_ptr()),
+                    _mm_loadu_pd(p2.as_ptr()),
+                    _mm_loadu_pd(p3.as_ptr()),
+                );
+                // [x0 y0 x2 y2] and [x1 y1 x3 y3], then the x and the y of all four.
+                let lo = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(xy0), xy2);
+                let hi = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(xy1), xy3);
+                let z = _mm256_set_pd(p3[2], p2[2], p1[2], p0[2]);
+                (
+                    _mm256_sub_pd(_mm256_unpacklo_pd(lo, hi), ex),
+                    _mm256_sub_pd(_mm256_unpackhi_pd(lo, hi), ey),
+                    _mm256_sub_pd(z, ez),
+                )
+            }};
+        }
+        macro_rules! sub {
+            ($x:expr, $y:expr) => {
+                _mm256_sub_pd($x, $y)
+            };
+        }
+        macro_rules! mul {
+            ($x:expr, $y:expr) => {
+                _mm256_mul_pd($x, $y)
+            };
+        }
+        macro_rules! add {
+            ($x:expr, $y:expr) => {
+                _mm256_add_pd($x, $y)
+            };
+        }
+        // `(x * x + y * y) + z * z`, as `insphere_det`.
+        macro_rules! norm2 {
+            ($x:expr, $y:expr, $z:expr) => {
+                add!(add!(mul!($x, $x), mul!($y, $y)), mul!($z, $z))
+            };
+        }
+        // `u * v - w * t`.
+        macro_rules! minor {
+            ($u:expr, $v:expr, $w:expr, $t:expr) => {
+                sub!(mul!($u, $v), mul!($w, $t))
+            };
+        }
+        let (ax, ay, az) = vertex!(0);
+        let (bx, by, bz) = vertex!(1);
+        let (cx, cy, cz) = vertex!(2);
+        let (dx, dy, dz) = vertex!(3);
+        let a2 = norm2!(ax, ay, az);
+        let b2 = norm2!(bx, by, bz);
+        let c2 = norm2!(cx, cy, cz);
+        let d2 = norm2!(dx, dy, dz);
+        let ab = minor!(ax, by, bx, ay);
+        let ac = minor!(ax, cy, cx, ay);
+        let ad = minor!(ax, dy, dx, ay);
+        let bc = minor!(bx, cy, cx, by);
+        let bd = minor!(bx, dy, dx, by);
+        let cd = minor!(cx, dy, dx, cy);
+        let abc = add!(minor!(az, bc, bz, ac), mul!(cz, ab));
+        let abd = add!(minor!(az, bd, bz, ad), mul!(dz, ab));
+        let acd = add!(minor!(az, cd, cz, ad), mul!(dz, ac));
+        let bcd = add!(minor!(bz, cd, cz, bd), mul!(dz, bc));
+        let det = add!(minor!(d2, abc, c2, abd), minor!(b2, acd, a2, bcd));
+        let mut dets = [0.0f64; 4];
+        // `dets` holds four `f64`; an unaligned store.
+        _mm256_storeu_pd(dets.as_mut_ptr(), det);
+        // The answers as `insphere_static_lanes` gives them, from comparisons in the lanes (a
+        // branch per lane on the sign would be mispredicted half the time).
+        let eps = _mm256_loadu_pd(eps.as_ptr());
+        let neg_eps = _mm256_xor_pd(eps, _mm256_set1_pd(-0.0));
+        let decided = _mm256_movemask_pd(_mm256_or_pd(
+            _mm256_cmp_pd::<_CMP_GT_OQ>(det, eps),
+            _mm256_cmp_pd::<_CMP_LT_OQ>(det, neg_eps),
+        ));
+        let zero = _mm256_setzero_pd();
+        let below = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(det, zero));
+        let above = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(det, zero));
+        let mut out = [0i32; 4];
+        for (l, o) in out.iter_mut().enumerate() {
+            // `-sign(det)` where decided, else 0.
+            let bit = |m: i32| (m >> l) & 1;
+            *o = (bit(below) - bit(above)) * bit(decided);
+        }
+        (out, dets)
+    }
 }
 
 /// The determinant of [`insphere_bounded`] (negative when `e` is inside the sphere of a
@@ -814,11 +1013,12 @@ mod tests {
         })
     }
 
-    /// The lanes of [`insphere_static_lanes`] (8 and 4) against the one-test functions on the
-    /// hard cases, each translated so that its fifth point is the group's common one: the same
-    /// determinant bits as [`insphere_det`], a decided lane has the exact sign, and an
-    /// undecided one (ties, and lanes without a static bound) continues to the exact sign and
-    /// to [`in_conflict_bounded`]'s answer.
+    /// The lanes of [`insphere_static_lanes`] (8 and 4, and [`insphere_static4_avx2`]'s four
+    /// where the CPU has AVX2) against the one-test functions on the hard cases, each
+    /// translated so that its fifth point is the group's common one: the same determinant bits
+    /// as [`insphere_det`], a decided lane has the exact sign, and an undecided one (ties, and
+    /// lanes without a static bound) continues to the exact sign and to
+    /// [`in_conflict_bounded`]'s answer.
     #[test]
     fn lanes_agree_with_the_one_test_filter() {
         use std::array::from_fn;
@@ -838,6 +1038,18 @@ mod tests {
             });
             let (s8, d8) = insphere_static_lanes(&t, &e, &eps);
             let (s4, d4) = insphere_static_lanes::<4>(&from_fn(|l| t[l]), &e, &from_fn(|l| eps[l]));
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // The same four tets read from a point array, in a shuffled order.
+                let mut pos: Vec<[f64; 3]> = t[..4].iter().flatten().copied().collect();
+                pos.reverse();
+                let ids: [[u32; 4]; 4] = from_fn(|l| from_fn(|i| (15 - 4 * l - i) as u32));
+                // SAFETY: the CPU has AVX2.
+                let (sa, da) =
+                    unsafe { insphere_static4_avx2(&pos, &ids, &e, &from_fn(|l| eps[l])) };
+                assert_eq!(sa, s4);
+                assert_eq!(da.map(f64::to_bits), d4.map(f64::to_bits));
+            }
             for l in 0..8 {
                 let [a, b, c, d] = &t[l];
                 let det = insphere_det(a, b, c, d, &e);
@@ -903,6 +1115,68 @@ mod tests {
                 orient3d_exact(&p[0], &p[1], &p[2], &p[3])
             );
         }
+    }
+
+    /// [`orient3d_faces_avx2`] against [`orient3d_bounded`] face by face, on the hard cases
+    /// (the first four points a tet, the fifth the walk's point) with the static bound, a
+    /// tight one, none, and one equal to a face's |det| (which tells one ulp apart): a lane
+    /// is undecided exactly where the scalar filter is (the same determinant bits), and with
+    /// a bound that holds a decided lane has the exact sign.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn face_lanes_agree_with_the_one_face_filter() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let (mut decided, mut undecided) = (0, 0);
+        for (i, p) in hard_cases(12000).enumerate() {
+            let t = [&p[0], &p[1], &p[2], &p[3]];
+            let face_det = |k: usize| {
+                let mut q = t;
+                q[k] = &p[4];
+                let [a, b, c, d] = q;
+                let (bx, by, bz) = (b[0] - a[0], b[1] - a[1], b[2] - a[2]);
+                let (cx, cy, cz) = (c[0] - a[0], c[1] - a[1], c[2] - a[2]);
+                let (dx, dy, dz) = (d[0] - a[0], d[1] - a[1], d[2] - a[2]);
+                bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx)
+            };
+            // The last: a bound equal to one face's |det|, undecided only if the lane has the
+            // same bits. (By `i % 5`: the hard cases vary with `i % 4` and `i % 6`.)
+            let eps = [
+                static_orient_bound(2.0),
+                1e-3,
+                f64::INFINITY,
+                face_det(i % 4).abs(),
+                face_det((i + 1) % 4).abs(),
+            ][i % 5];
+            // SAFETY: the CPU has AVX2.
+            let (negative, open) = unsafe { orient3d_faces_avx2(t, &p[4], eps) };
+            for k in 0..4 {
+                let mut q = t;
+                q[k] = &p[4];
+                let [a, b, c, d] = q;
+                let det = face_det(k);
+                let lane_open = (open >> k) & 1 == 1;
+                assert_eq!(lane_open, !(det.abs() > eps), "case {i}, face {k}");
+                if lane_open {
+                    undecided += 1;
+                    assert_eq!((negative >> k) & 1, 0);
+                } else {
+                    decided += 1;
+                    assert_eq!((negative >> k) & 1 == 1, det < 0.0, "case {i}, face {k}");
+                    if i % 5 < 3 {
+                        // A bound that holds: the exact sign.
+                        let exact = orient3d_exact(a, b, c, d);
+                        assert_eq!(orient3d_bounded(a, b, c, d, eps), exact);
+                        assert_eq!(det < 0.0, exact < 0, "case {i}, face {k}");
+                    }
+                }
+            }
+        }
+        assert!(
+            decided > 10_000 && undecided > 10_000,
+            "{decided} / {undecided}"
+        );
     }
 
     /// The axis-aligned-plane shortcut of the exact orientation agrees with Shewchuk's

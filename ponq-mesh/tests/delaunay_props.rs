@@ -740,8 +740,10 @@ mod hull_fuzz {
     }
 }
 
-/// The portable insertion (the same code compiled without AVX2, forced by the testing option)
-/// gives the same arrays as the default one (AVX2 where the CPU has it), on one thread and
+/// The portable insertion (the same code compiled without AVX2, forced by the testing option;
+/// with AVX2 the walk tests a tet's four faces in vector lanes and the cavity search reads its
+/// points straight into them) gives the same arrays as the default one (AVX2 where the CPU has
+/// it), on one thread and
 /// two, on random points, a lattice (every conflict test a tie) and grid-snapped points
 /// inside a cube (ties and tets of the super-tetrahedron).
 #[test]

@@ -18,6 +18,7 @@
 #[path = "util/args.rs"]
 mod args;
 
+use anyhow::{Context, Result, ensure};
 use ponq_mesh::delaunay::{Delaunay, DelaunayStats};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -57,30 +58,32 @@ fn built_in_sets() -> Vec<(String, Vec<[f64; 3]>)> {
     sets
 }
 
-fn read_points(path: &Path) -> Vec<[f64; 3]> {
+fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
     let bytes = std::fs::read(path)
-        .unwrap_or_else(|e| panic!("cannot read point file {}: {e}", path.display()));
-    assert!(
+        .with_context(|| format!("cannot read point file {}", path.display()))?;
+    ensure!(
         bytes.len().is_multiple_of(24),
         "{}: not a whole number of f64 triples",
         path.display()
     );
-    bytes
+    Ok(bytes
         .chunks_exact(24)
         .map(|c| {
-            std::array::from_fn(|k| {
-                f64::from_le_bytes(c[8 * k..8 * k + 8].try_into().expect("8 bytes"))
-            })
+            let mut p = [0.0; 3];
+            for (x, b) in p.iter_mut().zip(c.chunks_exact(8)) {
+                *x = f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
+            }
+            p
         })
-        .collect()
+        .collect())
 }
 
-fn write_points(path: &Path, pts: &[[f64; 3]]) {
+fn write_points(path: &Path, pts: &[[f64; 3]]) -> Result<()> {
     let bytes: Vec<u8> = pts
         .iter()
         .flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()))
         .collect();
-    std::fs::write(path, bytes).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
 }
 
 const USAGE: &str = "\
@@ -101,7 +104,7 @@ see DelaunayStats::times; best of 5 each), the ordering and output stages on all
 (\"stopped\": the workers stopped early, too many backed off), rebuilds with a larger
 super-tetrahedron.";
 
-fn main() {
+fn main() -> Result<()> {
     let args = args::parse(USAGE, &["--write"]);
     let mut write_dir: Option<PathBuf> = None;
     let mut files = Vec::new();
@@ -127,19 +130,20 @@ fn main() {
             .map(|f| {
                 let pts = if f.extension().is_some_and(|e| e == "npz") {
                     ponq_mesh::io::npz::read_ponq(f)
-                        .unwrap_or_else(|e| panic!("cannot read {}: {e}", f.display()))
+                        .with_context(|| format!("cannot read {}", f.display()))?
                         .vstars()
                 } else {
-                    read_points(f)
+                    read_points(f)?
                 };
-                (f.display().to_string(), pts)
+                Ok((f.display().to_string(), pts))
             })
-            .collect()
+            .collect::<Result<_>>()?
     };
     if let Some(dir) = &write_dir {
-        std::fs::create_dir_all(dir).expect("create the --write folder");
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the --write folder {}", dir.display()))?;
         for (name, pts) in &sets {
-            write_points(&dir.join(format!("{name}.f64")), pts);
+            write_points(&dir.join(format!("{name}.f64")), pts)?;
         }
     }
     let threads = rayon::current_num_threads();
@@ -150,13 +154,14 @@ fn main() {
     for (name, pts) in &sets {
         // The best whole call and, apart, the best of each stage, of 5 (seconds: whole call,
         // ordering, insertion, output).
-        let time = |workers: usize| {
+        let time = |workers: usize| -> Result<_> {
             let mut best = [f64::MAX; 4];
             let mut tets = 0;
             let mut stats = DelaunayStats::default();
             for _ in 0..5 {
                 let t = Instant::now();
-                let dt = Delaunay::with_threads(pts, workers).expect("finite points");
+                let dt = Delaunay::with_threads(pts, workers)
+                    .with_context(|| format!("cannot triangulate {name}"))?;
                 let s = dt.stats.times;
                 let run = [t.elapsed(), s.ordering, s.insertion, s.output];
                 for (b, r) in best.iter_mut().zip(run) {
@@ -165,10 +170,10 @@ fn main() {
                 tets = dt.tets.len();
                 stats = dt.stats;
             }
-            (best, tets, stats)
+            Ok((best, tets, stats))
         };
-        let ([one, _, one_insertion, _], tets, _) = time(1);
-        let ([all, ordering, all_insertion, output], _, stats) = time(threads);
+        let ([one, _, one_insertion, _], tets, _) = time(1)?;
+        let ([all, ordering, all_insertion, output], _, stats) = time(threads)?;
         let per_point = |s: f64| s * 1e6 / pts.len() as f64;
         let stopped = if stats.parallel_stopped {
             " (stopped)"
@@ -191,4 +196,5 @@ fn main() {
             stats.rebuilds,
         );
     }
+    Ok(())
 }

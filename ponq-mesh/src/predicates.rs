@@ -82,6 +82,29 @@ pub fn orient3d_bounded(
     orient3d_exact(a, b, c, d)
 }
 
+// Packed `f64` arithmetic of the AVX2 lanes below ([`orient3d_faces_avx2`],
+// [`insphere_static4_avx2`]): macros rather than closures, which are not always inlined in
+// AVX2 code (see `flips::error_at_avx2`). Each is one operation, so the lanes keep the scalar
+// code's order.
+#[cfg(target_arch = "x86_64")]
+macro_rules! sub {
+    ($x:expr, $y:expr) => {
+        std::arch::x86_64::_mm256_sub_pd($x, $y)
+    };
+}
+#[cfg(target_arch = "x86_64")]
+macro_rules! mul {
+    ($x:expr, $y:expr) => {
+        std::arch::x86_64::_mm256_mul_pd($x, $y)
+    };
+}
+#[cfg(target_arch = "x86_64")]
+macro_rules! add {
+    ($x:expr, $y:expr) => {
+        std::arch::x86_64::_mm256_add_pd($x, $y)
+    };
+}
+
 /// The static filter of [`orient3d_bounded`] for the four faces of tet `t` against point `p`,
 /// one per lane, with AVX2: lane `k` is the orientation of `t` with its vertex `k` replaced by
 /// `p` (what a visibility walk asks of each face). Returns two masks, bit `k` for lane `k`:
@@ -107,16 +130,6 @@ pub unsafe fn orient3d_faces_avx2(t: [&[f64; 3]; 4], p: &[f64; 3], eps: f64) -> 
                 _mm256_blend_pd::<{ 1 << $q }>(tq, pq)
             }};
         }
-        macro_rules! sub {
-            ($x:expr, $y:expr) => {
-                _mm256_sub_pd($x, $y)
-            };
-        }
-        macro_rules! mul {
-            ($x:expr, $y:expr) => {
-                _mm256_mul_pd($x, $y)
-            };
-        }
         let (ax, ay, az) = (lanes!(0, 0), lanes!(0, 1), lanes!(0, 2));
         let (bx, by, bz) = (
             sub!(lanes!(1, 0), ax),
@@ -137,7 +150,7 @@ pub unsafe fn orient3d_faces_avx2(t: [&[f64; 3]; 4], p: &[f64; 3], eps: f64) -> 
         let m1 = sub!(mul!(cy, dz), mul!(cz, dy));
         let m2 = sub!(mul!(cx, dz), mul!(cz, dx));
         let m3 = sub!(mul!(cx, dy), mul!(cy, dx));
-        let det = _mm256_add_pd(sub!(mul!(bx, m1), mul!(by, m2)), mul!(bz, m3));
+        let det = add!(sub!(mul!(bx, m1), mul!(by, m2)), mul!(bz, m3));
         let above = _mm256_cmp_pd::<_CMP_GT_OQ>(det, _mm256_set1_pd(eps));
         let below = _mm256_cmp_pd::<_CMP_LT_OQ>(det, _mm256_set1_pd(-eps));
         let decided = _mm256_movemask_pd(_mm256_or_pd(above, below)) as u32;
@@ -292,21 +305,6 @@ pub unsafe fn insphere_static4_avx2(
                     _mm256_sub_pd(z, ez),
                 )
             }};
-        }
-        macro_rules! sub {
-            ($x:expr, $y:expr) => {
-                _mm256_sub_pd($x, $y)
-            };
-        }
-        macro_rules! mul {
-            ($x:expr, $y:expr) => {
-                _mm256_mul_pd($x, $y)
-            };
-        }
-        macro_rules! add {
-            ($x:expr, $y:expr) => {
-                _mm256_add_pd($x, $y)
-            };
         }
         // `(x * x + y * y) + z * z`, as `insphere_det`.
         macro_rules! norm2 {

@@ -1456,7 +1456,8 @@ impl Worker {
     /// v*, insertion stage): one thread 2.44 -> 2.22 us per point, two threads 1.34 -> 1.28;
     /// in other rounds the lanes without AVX2 (SSE2 pairs) gave 2.47 -> 2.29 and 1.36 -> 1.35,
     /// AVX2 without the lanes 2.44 -> 2.35 and 1.34 -> 1.35. Same results (no fused
-    /// operations).
+    /// operations). Since then the points go straight from `pos` into the lanes
+    /// ([`insphere_static4_avx2`], see [`Shared::conflict_lanes`]): one thread 2-4% faster.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn insert_avx2<const PAR: bool>(

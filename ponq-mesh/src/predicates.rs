@@ -245,9 +245,9 @@ pub fn insphere_static_lanes<const L: usize>(
 /// [`insphere_static_lanes`] for four tets given by vertex numbers into `pos`, with AVX2:
 /// the points go from `pos` straight into the lanes (x and y of a point by one 16-byte load,
 /// two shuffles per register of four; z one by one), with no copy into an array of points
-/// first, and the answers come from comparisons in the lanes. Every lane does
-/// [`insphere_det`]'s operations in its order (no fused operations), so the results are
-/// [`insphere_static_lanes`]' to the bit (tested). Why by hand: the cavity search of the
+/// first, and the answers come from comparisons in the lanes. Every lane does the operations
+/// of [`insphere_bounded`]'s determinant in their order (no fused operations), so the results
+/// are [`insphere_static_lanes`]' to the bit (tested). Why by hand: the cavity search of the
 /// Delaunay (`crate::delaunay`) runs this once per cavity tet, and the compiler built the
 /// plain loop's lanes from scalars (a broadcast and a blend per coordinate) after a copy of
 /// the points; a first version that took the answers lane by lane compiled to a branch per

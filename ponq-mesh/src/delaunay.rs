@@ -972,12 +972,18 @@ impl Shared<'_> {
     fn face_sees(&self, tv: [u32; 4], k: usize, p: &[f64; 3]) -> i32 {
         let mut q = [self.p(tv[0]), self.p(tv[1]), self.p(tv[2]), self.p(tv[3])];
         q[k] = p;
-        let eps = if self.real(tv) {
+        orient3d_bounded(q[0], q[1], q[2], q[3], self.orient_eps(tv))
+    }
+
+    /// The static orientation bound for tet `tv` with one vertex replaced by a real point:
+    /// [`Shared::static_orient_eps`] when all its vertices are real, else none.
+    #[inline(always)]
+    fn orient_eps(&self, tv: [u32; 4]) -> f64 {
+        if self.real(tv) {
             self.static_orient_eps
         } else {
             f64::INFINITY
-        };
-        orient3d_bounded(q[0], q[1], q[2], q[3], eps)
+        }
     }
 
     /// The static conflict tests of four tets (by their vertices) against vertex `v`, one per
@@ -1202,11 +1208,7 @@ impl Worker {
                 let open = (0..4).fold(0u32, |m, k| {
                     m | (((tn[k] != NONE) & (tn[k] != prev)) as u32) << k
                 });
-                let eps = if sh.real(tv) {
-                    sh.static_orient_eps
-                } else {
-                    f64::INFINITY
-                };
+                let eps = sh.orient_eps(tv);
                 // SAFETY: `AVX2` is set only by `walk_avx2`, which runs only where the CPU
                 // has AVX2.
                 let (negative, undecided) =

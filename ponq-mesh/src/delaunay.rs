@@ -682,7 +682,7 @@ impl Delaunay {
     /// underflow. The vertices are the input points (with such coordinates at 0).
     ///
     /// # Errors
-    /// [`Error::InvalidInput`] for a non-finite coordinate or more than 2^31 points.
+    /// [`Error::InvalidInput`] for a non-finite coordinate or 2^30 points or more.
     pub fn new(points: &[[f64; 3]]) -> Result<Self> {
         Self::with_threads(points, rayon::current_num_threads())
     }
@@ -710,7 +710,9 @@ impl Delaunay {
     pub fn with_options(points: &[[f64; 3]], opts: &DelaunayOptions) -> Result<Self> {
         use rayon::prelude::*;
         let start = Instant::now();
-        if points.len() >= (1usize << 31) - 8 {
+        // Vertex numbers and their stamps ([`Stamps::of`]) stay below `u32::MAX`. (Tet slots are
+        // `u32` too, which bounds the points near 2^32 / 6.5 tets per point anyway.)
+        if points.len() >= MAX_POINTS {
             return Err(Error::InvalidInput(format!(
                 "{} points is more than the triangulation supports",
                 points.len()
@@ -822,8 +824,7 @@ impl Delaunay {
 struct Tet {
     v: [AtomicU32; 4],
     n: [AtomicU32; 4],
-    /// [`DEAD`] for a free slot, else [`NO_STAMP`] or an insertion stamp (`2v + 2` in the
-    /// cavity of vertex `v`, `2v + 3` next to it).
+    /// [`DEAD`] for a free slot, else [`NO_STAMP`] or an insertion's stamp ([`Stamps`]).
     mark: AtomicU32,
 }
 
@@ -872,17 +873,38 @@ const FACE_EDGES: [(usize, usize, usize); 3] = [(0, 1, 2), (1, 2, 0), (2, 0, 1)]
 /// [`Worker::link_small`] (a Delaunay cavity in 3D has about 16 on average).
 const SMALL_CAVITY: usize = 32;
 
-/// What the cavity search does with a neighbour of a cavity tet.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Neighbour {
-    /// None there (the hull of the super-tetrahedron): a boundary face.
-    Hull,
-    /// Already in the cavity.
-    InCavity,
-    /// Known not to be in conflict (tested from another cavity tet).
-    Known,
-    /// To test against the new point.
-    Test,
+/// The stamps an insertion puts on the tets it looks at (see [`Tet::mark`]): distinct for
+/// each vertex, and never [`DEAD`] or [`NO_STAMP`].
+#[derive(Debug, Clone, Copy)]
+struct Stamps {
+    /// In the cavity (in conflict with the new vertex).
+    in_cavity: u32,
+    /// Next to the cavity and not in conflict.
+    outside: u32,
+    /// Next to the cavity, its conflict test not yet done.
+    waiting: u32,
+}
+
+impl Stamps {
+    /// The stamps of vertex `v` (`3v + 2`, `3v + 3`, `3v + 4`: there are fewer than
+    /// [`MAX_POINTS`] vertices, so they fit in a `u32`).
+    #[inline(always)]
+    fn of(v: u32) -> Self {
+        Self {
+            in_cavity: 3 * v + 2,
+            outside: 3 * v + 3,
+            waiting: 3 * v + 4,
+        }
+    }
+}
+
+/// The face of tet `nt` that looks back at its neighbour `c` (adjacency is symmetric).
+#[inline(always)]
+fn back_face(nt: &Tet, c: u32) -> u8 {
+    let nn = nt.nbrs();
+    let j = (nn[1] == c) as u8 + 2 * (nn[2] == c) as u8 + 3 * (nn[3] == c) as u8;
+    debug_assert_eq!(nn[j as usize], c, "adjacency is symmetric");
+    j
 }
 
 /// A slot of a worker's directed-edge table (see [`Worker::link_hashed`]).
@@ -907,6 +929,9 @@ fn push_if<T: Copy>(v: &mut Vec<T>, x: T, keep: bool) {
     let len = v.len() - (!keep) as usize;
     v.truncate(len);
 }
+
+/// The most points a triangulation takes (see [`Stamps::of`]).
+const MAX_POINTS: usize = 1 << 30;
 
 /// Inputs smaller than this are triangulated by one thread.
 const PARALLEL_MIN_POINTS: usize = 8192;
@@ -1052,6 +1077,9 @@ struct Worker {
     rng: SplitMix,
     /// Cavity tets still to look around, each with the face it was entered through.
     stack: Vec<(u32, u8)>,
+    /// Faces of cavity tets whose neighbour was tested from another cavity tet (or waits
+    /// for its test): boundary faces if that neighbour is not in conflict.
+    later: Vec<(u32, u8, u32)>,
     cavity: Vec<u32>,
     /// Slots locked by the current insertion (parallel phase).
     held: Vec<u32>,
@@ -1087,6 +1115,7 @@ impl Worker {
             lock_attempts: 0,
             rng: SplitMix(seed),
             stack: Vec::new(),
+            later: Vec::new(),
             cavity: Vec::new(),
             held: Vec::new(),
             boundary: Vec::new(),
@@ -1423,18 +1452,68 @@ impl Worker {
     }
 
     /// Undoes the stamps and locks of a failed insertion. Its stamps are on the tets of the
-    /// cavity found so far, on those still to look around (the stack) and on the tets next to
-    /// them (the boundary): a neighbour is stamped only after it is locked, and then goes to
-    /// the stack or to the boundary. (A list of the stamped tets kept as they were stamped:
-    /// a store per conflict test.)
-    fn back_off<const PAR: bool>(&mut self, sh: &Shared, fail: Fail) -> Fail {
+    /// cavity found so far, on those still to look around (the stack), on the tets next to
+    /// them (the boundary) and on those waiting for their conflict test (`waiting`, the
+    /// neighbour of each): a neighbour is stamped only after it is locked, and then waits for
+    /// its test and goes to the stack or to the boundary. (A list of the stamped tets kept as
+    /// they were stamped: a store per conflict test.)
+    fn back_off<const PAR: bool>(
+        &mut self,
+        sh: &Shared,
+        waiting: &[(u32, u8, u32)],
+        fail: Fail,
+    ) -> Fail {
         let next_to = self.boundary.iter().map(|b| b.2).filter(|&t| t != NONE);
         let pending = self.stack.iter().map(|e| e.0);
-        for t in self.cavity.iter().copied().chain(pending).chain(next_to) {
+        let waiting = waiting.iter().map(|w| w.2);
+        for t in self
+            .cavity
+            .iter()
+            .copied()
+            .chain(pending)
+            .chain(next_to)
+            .chain(waiting)
+        {
             sh.tets[t as usize].set_mark(NO_STAMP);
         }
         self.unlock_all::<PAR>(sh);
         fail
+    }
+
+    /// The conflict tests of the cavity search waiting in `lanes` (at most four; `ids` and
+    /// `eps` hold their tets' vertices and static bounds in the same lanes, any tets in the
+    /// lanes after them): a tet in conflict with `v` joins the cavity (the stack), any other
+    /// gives a boundary face.
+    #[inline(always)]
+    fn test_lanes<const AVX2: bool>(
+        &mut self,
+        sh: &Shared,
+        v: u32,
+        stamps: Stamps,
+        lanes: &[(u32, u8, u32)],
+        ids: &[[u32; 4]; 4],
+        eps: &[f64; 4],
+    ) {
+        let (signs, dets) = sh.conflict_lanes::<AVX2>(ids, v, eps);
+        for (r, &(c, k, nb)) in lanes.iter().enumerate() {
+            let nt = &sh.tets[nb as usize];
+            let conflict = if signs[r] != 0 {
+                signs[r] > 0
+            } else {
+                sh.conflicts_past_static(ids[r], v, dets[r])
+            };
+            // From here on without a branch on `conflict` (in a cavity search it is true
+            // about as often as false): the mark is a select, the tet goes to the stack
+            // or to the boundary by a push that is kept or taken back.
+            nt.set_mark(if conflict {
+                stamps.in_cavity
+            } else {
+                stamps.outside
+            });
+            let j = back_face(nt, c);
+            push_if(&mut self.stack, (nb, j), conflict);
+            push_if(&mut self.boundary, (c, k, nb, j), !conflict);
+        }
     }
 
     /// Inserts vertex `v`, or backs off leaving the triangulation unchanged. On x86-64 CPUs
@@ -1459,7 +1538,10 @@ impl Worker {
     /// in other rounds the lanes without AVX2 (SSE2 pairs) gave 2.47 -> 2.29 and 1.36 -> 1.35,
     /// AVX2 without the lanes 2.44 -> 2.35 and 1.34 -> 1.35. Same results (no fused
     /// operations). Since then the points go straight from `pos` into the lanes
-    /// ([`insphere_static4_avx2`], see [`Shared::conflict_lanes`]): one thread 2-4% faster.
+    /// ([`insphere_static4_avx2`], see [`Shared::conflict_lanes`]): one thread 2-4% faster;
+    /// and the lanes are filled four at a time from any cavity tets (they held the three
+    /// other neighbours of one cavity tet, so a fourth of the work was idle): one thread
+    /// 8-9% faster.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn insert_avx2<const PAR: bool>(
@@ -1478,83 +1560,84 @@ impl Worker {
         v: u32,
     ) -> std::result::Result<(), Fail> {
         let t = self.locate::<PAR>(sh, v)?;
-        let in_cav = 2 * v + 2;
-        let not_cav = 2 * v + 3;
+        let stamps = Stamps::of(v);
         self.cavity.clear();
         self.boundary.clear();
         self.stack.clear();
+        self.later.clear();
         // Each stack entry keeps the face it was entered through (4: none), which leads back
         // into the cavity and needs no look.
         self.stack.push((t, 4));
-        sh.tets[t as usize].set_mark(in_cav);
-        while let Some((c, entry)) = self.stack.pop() {
-            self.cavity.push(c);
-            let cn = sh.tets[c as usize].nbrs();
-            // Touch the four neighbours together so that their cache misses overlap.
-            let _touch = cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.mark.load(Relaxed)));
-            // The other faces: three after the entry face, or all four of the first tet
-            // (a count instead of a skip, which would be a branch on the data).
-            let (first, count) = if entry == 4 { (0, 4) } else { (entry + 1, 3) };
-            // First the neighbours' locks and marks; the conflict tests of the neighbours
-            // that need one then run together ([`insphere_static_lanes`]).
-            let mut todo = [(NONE, 0u8, Neighbour::InCavity); 4];
-            // Lane r: the vertices of the neighbour to test (vertex 0's point in a lane without
-            // a test: any point, its answer is not read).
-            let mut ids = [[0u32; 4]; 4];
-            let mut eps = [f64::INFINITY; 4];
-            for r in 0..count {
-                let k = (first + r) & 3;
-                let nb = cn[k as usize];
-                let state = if nb == NONE {
-                    Neighbour::Hull
-                } else {
+        sh.tets[t as usize].set_mark(stamps.in_cavity);
+        // The conflict tests wait here until four are ready, then run together
+        // ([`Shared::conflict_lanes`]): lane r tests neighbour `ids[r]` of cavity tet `c`
+        // across its face `k` (`lanes[r] = (c, k, neighbour)`). The cavity search goes on
+        // from the other cavity tets meanwhile; the cavity is the same in any order.
+        let mut lanes = [(NONE, 0u8, NONE); 4];
+        let mut ids = [[0u32; 4]; 4];
+        let mut eps = [f64::INFINITY; 4];
+        let mut ready = 0usize;
+        loop {
+            while let Some((c, entry)) = self.stack.pop() {
+                self.cavity.push(c);
+                let cn = sh.tets[c as usize].nbrs();
+                // Touch the four neighbours together so that their cache misses overlap.
+                let _touch =
+                    cn.map(|nb| sh.tets.get(nb as usize).map_or(0, |t| t.mark.load(Relaxed)));
+                // The other faces: three after the entry face, or all four of the first tet
+                // (a count instead of a skip, which would be a branch on the data).
+                let (first, count) = if entry == 4 { (0, 4) } else { (entry + 1, 3) };
+                for r in 0..count {
+                    let k = (first + r) & 3;
+                    let nb = cn[k as usize];
+                    if nb == NONE {
+                        // The hull of the super-tetrahedron: a boundary face.
+                        self.boundary.push((c, k, NONE, 0));
+                        continue;
+                    }
                     // (One thread takes no locks: `try_lock::<false>` is `true`.)
                     if !self.try_lock::<PAR>(sh, nb) {
-                        return Err(self.back_off::<PAR>(sh, Fail::Busy));
+                        return Err(self.back_off::<PAR>(sh, &lanes[..ready], Fail::Busy));
                     }
-                    let mark = sh.tets[nb as usize].mark();
-                    if mark == in_cav {
-                        Neighbour::InCavity
-                    } else if mark == not_cav {
-                        Neighbour::Known
-                    } else {
-                        let tv = sh.tets[nb as usize].verts();
-                        ids[r as usize] = tv;
-                        if sh.real(tv) {
-                            eps[r as usize] = sh.static_eps;
-                        }
-                        Neighbour::Test
+                    let nt = &sh.tets[nb as usize];
+                    let mark = nt.mark();
+                    if mark == stamps.in_cavity {
+                        continue;
                     }
-                };
-                todo[r as usize] = (nb, k, state);
-            }
-            let (signs, dets) = sh.conflict_lanes::<AVX2>(&ids, v, &eps);
-            for r in 0..count as usize {
-                let (nb, k, state) = todo[r];
-                if state == Neighbour::Hull {
-                    self.boundary.push((c, k, NONE, 0));
-                    continue;
-                }
-                if state == Neighbour::InCavity {
-                    continue;
-                }
-                let nt = &sh.tets[nb as usize];
-                let conflict = state == Neighbour::Test
-                    && if signs[r] != 0 {
-                        signs[r] > 0
+                    if mark == stamps.outside || mark == stamps.waiting {
+                        // Tested, or waiting for its test, from another cavity tet: a
+                        // boundary face if it is not in conflict, known at the end.
+                        self.later.push((c, k, nb));
+                        continue;
+                    }
+                    nt.set_mark(stamps.waiting);
+                    let tv = nt.verts();
+                    lanes[ready] = (c, k, nb);
+                    ids[ready] = tv;
+                    eps[ready] = if sh.real(tv) {
+                        sh.static_eps
                     } else {
-                        sh.conflicts_past_static(nt.verts(), v, dets[r])
+                        f64::INFINITY
                     };
-                // From here on without a branch on `conflict` (in a cavity search it is true
-                // about as often as false): the mark is a select, the tet goes to the stack
-                // or to the boundary by a push that is kept or taken back.
-                nt.set_mark(if conflict { in_cav } else { not_cav });
-                let nn = nt.nbrs();
-                // The face of `nb` that looks back at `c` (adjacency is symmetric).
-                let j = (nn[1] == c) as u8 + 2 * (nn[2] == c) as u8 + 3 * (nn[3] == c) as u8;
-                debug_assert_eq!(nn[j as usize], c, "adjacency is symmetric");
-                push_if(&mut self.stack, (nb, j), conflict);
-                push_if(&mut self.boundary, (c, k, nb, j), !conflict);
+                    ready += 1;
+                    if ready == 4 {
+                        self.test_lanes::<AVX2>(sh, v, stamps, &lanes, &ids, &eps);
+                        ready = 0;
+                    }
+                }
+            }
+            if ready == 0 {
+                break;
+            }
+            // Fewer than four (the lanes after them hold earlier tests: computed, not read).
+            self.test_lanes::<AVX2>(sh, v, stamps, &lanes[..ready], &ids, &eps);
+            ready = 0;
+        }
+        for i in 0..self.later.len() {
+            let (c, k, nb) = self.later[i];
+            let nt = &sh.tets[nb as usize];
+            if nt.mark() == stamps.outside {
+                self.boundary.push((c, k, nb, back_face(nt, c)));
             }
         }
         // Slots: the cavity's, then free ones, then fresh ones; all taken before any change.
@@ -1585,7 +1668,7 @@ impl Worker {
             } else {
                 self.free.extend_from_slice(&self.taken);
                 self.taken.clear();
-                return Err(self.back_off::<PAR>(sh, Fail::NoSpace));
+                return Err(self.back_off::<PAR>(sh, &[], Fail::NoSpace));
             }
         }
         // New tets: one per boundary face, the cavity tet's vertex k replaced by v. Read the

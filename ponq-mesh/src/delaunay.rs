@@ -1604,9 +1604,13 @@ impl Worker {
                     if mark == stamps.in_cavity {
                         continue;
                     }
-                    if mark == stamps.outside || mark == stamps.waiting {
-                        // Tested, or waiting for its test, from another cavity tet: a
-                        // boundary face if it is not in conflict, known at the end.
+                    if mark == stamps.outside {
+                        self.boundary.push((c, k, nb, back_face(nt, c)));
+                        continue;
+                    }
+                    if mark == stamps.waiting {
+                        // Waiting for its test, from another cavity tet: a boundary face if
+                        // it is not in conflict, known at the end.
                         self.later.push((c, k, nb));
                         continue;
                     }

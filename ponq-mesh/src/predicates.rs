@@ -219,11 +219,12 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
 
 /// The static filter of [`insphere_bounded`] for `L` tets against one point `e` at once, one
 /// tet per lane of `[f64; L]` arrays (the compiler computes the lanes together in vector
-/// registers, SSE2 pairs at least): for lane `l`, `-sign(det)` when `|det| > eps[l]`, else 0
-/// (undecided: [`in_conflict_past_static`] goes on from the lane's determinant, the second
-/// array). The lanes compute [`insphere_bounded`]'s determinant by the same function (Rust
-/// never fuses a multiply and an add, packed or not), so a decided lane is that function's
-/// answer (tested).
+/// registers, SSE2 pairs at least), with the local bound of [`reach_decides`] beside it: for
+/// lane `l`, `-sign(det)` when `|det| > eps[l]` or that bound decides, else 0 (undecided:
+/// [`in_conflict_past_static`] goes on from the lane's determinant, the second array). The
+/// lanes compute [`insphere_bounded`]'s determinant by the same function (Rust never fuses a
+/// multiply and an add, packed or not), so a decided lane is that function's answer
+/// (tested).
 #[inline(always)]
 pub fn insphere_static_lanes<const L: usize>(
     t: &[[[f64; 3]; 4]; L],
@@ -234,8 +235,8 @@ pub fn insphere_static_lanes<const L: usize>(
     let mut dets = [0.0f64; L];
     for l in 0..L {
         let [a, b, c, d] = &t[l];
-        let det = insphere_det(a, b, c, d, e);
-        let decided = (det > eps[l]) | (det < -eps[l]);
+        let (det, r2) = insphere_det_reach(a, b, c, d, e);
+        let decided = (det > eps[l]) | (det < -eps[l]) | reach_decides(det, r2);
         out[l] = if decided { -sign(det) } else { 0 };
         dets[l] = det;
     }
@@ -344,9 +345,24 @@ pub unsafe fn insphere_static4_avx2(
         // branch per lane on the sign would be mispredicted half the time).
         let eps = _mm256_loadu_pd(eps.as_ptr());
         let neg_eps = _mm256_xor_pd(eps, _mm256_set1_pd(-0.0));
+        // `reach_decides` with the same operations in the same order.
+        let r2 = _mm256_max_pd(_mm256_max_pd(a2, b2), _mm256_max_pd(c2, d2));
+        let in_range = _mm256_and_pd(
+            _mm256_cmp_pd::<_CMP_GT_OQ>(r2, _mm256_set1_pd(1e-40)),
+            _mm256_cmp_pd::<_CMP_LT_OQ>(r2, _mm256_set1_pd(1e40)),
+        );
+        let sq = mul!(r2, r2);
+        let r10 = mul!(mul!(sq, sq), r2);
+        let reach = _mm256_and_pd(
+            in_range,
+            _mm256_cmp_pd::<_CMP_GT_OQ>(mul!(det, det), mul!(_mm256_set1_pd(4e-26), r10)),
+        );
         let decided = _mm256_movemask_pd(_mm256_or_pd(
-            _mm256_cmp_pd::<_CMP_GT_OQ>(det, eps),
-            _mm256_cmp_pd::<_CMP_LT_OQ>(det, neg_eps),
+            reach,
+            _mm256_or_pd(
+                _mm256_cmp_pd::<_CMP_GT_OQ>(det, eps),
+                _mm256_cmp_pd::<_CMP_LT_OQ>(det, neg_eps),
+            ),
         ));
         let zero = _mm256_setzero_pd();
         let below = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(det, zero));
@@ -366,6 +382,19 @@ pub unsafe fn insphere_static4_avx2(
 /// (the lanes of [`insphere_static_lanes`] too) computes the same bits.
 #[inline(always)]
 fn insphere_det(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> f64 {
+    insphere_det_reach(a, b, c, d, e).0
+}
+
+/// [`insphere_det`] and the largest squared distance of `a`, `b`, `c` and `d` from `e` as
+/// computed along the way (the lifts), for [`reach_decides`].
+#[inline(always)]
+fn insphere_det_reach(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    c: &[f64; 3],
+    d: &[f64; 3],
+    e: &[f64; 3],
+) -> (f64, f64) {
     let (ax, ay, az) = (a[0] - e[0], a[1] - e[1], a[2] - e[2]);
     let (bx, by, bz) = (b[0] - e[0], b[1] - e[1], b[2] - e[2]);
     let (cx, cy, cz) = (c[0] - e[0], c[1] - e[1], c[2] - e[2]);
@@ -387,7 +416,35 @@ fn insphere_det(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
     let bcd = bz * cd - cz * bd + dz * bc;
     // det[a-e, b-e, c-e, d-e with lifts] = -a2*bcd + b2*acd - c2*abd + d2*abc; it is
     // negative when e is inside the sphere of a positively oriented (a, b, c, d).
-    (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd)
+    let det = (d2 * abc - c2 * abd) + (b2 * acd - a2 * bcd);
+    (det, fmax(fmax(a2, b2), fmax(c2, d2)))
+}
+
+/// Whether the sign of `det` is the exact sign of the insphere determinant, by a bound from
+/// `r2` alone, the largest squared distance of the four points from the fifth (both from
+/// [`insphere_det_reach`]). Unlike the static bound, which takes the extent of the whole
+/// input, it is local: on a dense input (the v* of a 230^3 PoNQ, whose flat regions give many
+/// nearly co-spherical tets) the static bound leaves one conflict test in ten undecided,
+/// this one almost none. Cheaper than the semi-static bound of [`insphere_past_static`]
+/// (no per-axis maxima), and looser by a small factor.
+///
+/// Error analysis: with `mx`, `my`, `mz` the largest absolute (computed) coordinate
+/// differences and `hi` their maximum, [`insphere_past_static`] bounds the error of `det` by
+/// `1.3e-13 * mx * my * mz * hi^2`. Each of them is at most `R`, the largest exact distance
+/// of the computed differences, and the computed lifts (products and sums of non-negative
+/// numbers, three roundings) are at least `R^2 (1 - u)^3`, so the error is below
+/// `1.3e-13 * r2^2.5 * (1 + 8u)`. The test `det^2 > 4e-26 * r2^5` (six roundings on either
+/// side) then means `|det| > 1.99e-13 * r2^2.5`, beyond the error. Range: with `r2` in
+/// `(1e-40, 1e40)` nothing overflows (`det^2 < 1e210`), `4e-26 * r2^5 > 1e-226` is a normal
+/// number, and an underflow inside the determinant (one axis with tiny differences) adds an
+/// absolute error below `1e-250` (at most a hundred operations of `2^-1075` each, times
+/// the later factors, below `3 R^3`), far below the bound (over `1e-113`). `det^2` itself
+/// may underflow: then the test fails and nothing is decided.
+#[inline(always)]
+fn reach_decides(det: f64, r2: f64) -> bool {
+    let in_range = (r2 > 1e-40) & (r2 < 1e40);
+    let sq = r2 * r2;
+    in_range & (det * det > 4e-26 * (sq * sq * r2))
 }
 
 /// [`insphere`] with a static error bound tried first: `static_eps` must be at least
@@ -1056,8 +1113,10 @@ mod tests {
                     assert_eq!((s4[l], d4[l].to_bits()), (s8[l], det.to_bits()));
                 }
                 let exact = robust_insphere([*a, *b, *c, *d, e]);
-                // Decided exactly where the static bound decides `insphere_bounded`.
-                assert_eq!(s8[l] != 0, det.abs() > eps[l]);
+                // Decided exactly where the static bound decides `insphere_bounded`, or the
+                // local one.
+                let r2 = insphere_det_reach(a, b, c, d, &e).1;
+                assert_eq!(s8[l] != 0, det.abs() > eps[l] || reach_decides(det, r2));
                 if s8[l] != 0 {
                     decided += 1;
                     assert_eq!(s8[l], exact);
@@ -1211,6 +1270,43 @@ mod tests {
             assert!((k - 0.5).abs() < 1e-15);
         }
         assert!(circumcenter(&O, &X, &Y, &[1.0, 1.0, 0.0]).is_none());
+    }
+
+    /// The local bound of [`reach_decides`] on the hard cases at scales from 2^-80 to 2^80,
+    /// and with the z differences squashed to 1e-200 (products that underflow): where it
+    /// decides, the sign is the exact one; it decides most of the generic cases in its range
+    /// and nothing outside it.
+    #[test]
+    fn reach_bound_decides_only_exact_signs() {
+        let cases: Vec<[[f64; 3]; 5]> = hard_cases(12000).collect();
+        for k in [-80, -60, -20, 0, 20, 60, 80] {
+            for squash in [false, true] {
+                let scale = 2f64.powi(k);
+                let (mut decided, mut generic) = (0, 0);
+                for (i, p) in cases.iter().enumerate() {
+                    let p = p.map(|q| {
+                        let z = if squash { q[2] * 1e-200 } else { q[2] };
+                        [q[0] * scale, q[1] * scale, z * scale]
+                    });
+                    let [a, b, c, d, e] = &p;
+                    let (det, r2) = insphere_det_reach(a, b, c, d, e);
+                    // Random points, neither rounded nor moved (see `hard_cases`).
+                    let is_generic = i % 6 < 2 && i % 4 == 0;
+                    generic += is_generic as usize;
+                    if reach_decides(det, r2) {
+                        decided += is_generic as usize;
+                        assert_eq!(-sign(det), robust_insphere(p), "case {i} at 2^{k} {squash}");
+                    }
+                }
+                // Differences up to 2 * 2^k: r2 up to 12 * 4^k, and over 1e-3 * 4^k.
+                let in_range = k.abs() < 70;
+                if in_range && !squash {
+                    assert!(decided > generic / 2, "2^{k}: {decided} of {generic}");
+                } else if !in_range {
+                    assert_eq!(decided, 0, "2^{k} {squash}");
+                }
+            }
+        }
     }
 
     /// The sign of Shewchuk's exact insphere (`robust`) in this module's convention.

@@ -1094,8 +1094,8 @@ struct Worker {
     rng: SplitMix,
     /// Cavity tets still to look around, each with the face it was entered through.
     stack: Vec<(u32, u8)>,
-    /// Faces of cavity tets whose neighbour was tested from another cavity tet (or waits
-    /// for its test): boundary faces if that neighbour is not in conflict.
+    /// Faces of cavity tets whose neighbour was waiting for its conflict test (queued from
+    /// another cavity tet): boundary faces if that neighbour turns out not in conflict.
     later: Vec<(u32, u8, u32)>,
     cavity: Vec<u32>,
     /// Slots locked by the current insertion (parallel phase).
@@ -1523,7 +1523,7 @@ impl Worker {
             };
             // From here on without a branch on `conflict` (in a cavity search it is true
             // about as often as false): the mark is a select, the tet goes to the stack
-            // or to the boundary by a push that is kept or taken back.
+            // or to the boundary by a write after the last item that is kept or not.
             nt.set_mark(if conflict {
                 stamps.in_cavity
             } else {

@@ -682,7 +682,7 @@ impl Delaunay {
     /// underflow. The vertices are the input points (with such coordinates at 0).
     ///
     /// # Errors
-    /// [`Error::InvalidInput`] for a non-finite coordinate or 2^30 points or more.
+    /// [`Error::InvalidInput`] for a non-finite coordinate or 2^28 points or more.
     pub fn new(points: &[[f64; 3]]) -> Result<Self> {
         Self::with_threads(points, rayon::current_num_threads())
     }
@@ -710,8 +710,7 @@ impl Delaunay {
     pub fn with_options(points: &[[f64; 3]], opts: &DelaunayOptions) -> Result<Self> {
         use rayon::prelude::*;
         let start = Instant::now();
-        // Vertex numbers and their stamps ([`Stamps::of`]) stay below `u32::MAX`. (Tet slots are
-        // `u32` too, which bounds the points near 2^32 / 6.5 tets per point anyway.)
+        // Tet slots and the vertices' stamps are `u32` (see `MAX_POINTS`).
         if points.len() >= MAX_POINTS {
             return Err(Error::InvalidInput(format!(
                 "{} points is more than the triangulation supports",
@@ -921,8 +920,10 @@ fn edge_key(x: u32, y: u32) -> u64 {
     ((x as u64) << 32) | y as u64
 }
 
-/// The most points a triangulation takes (see [`Stamps::of`]).
-const MAX_POINTS: usize = 1 << 30;
+/// The most points a triangulation takes: the tet arena starts at 8 slots per point (2^31 at
+/// this limit, 77 GB) and grows by half when it must, and slot numbers stay below [`NONE`];
+/// the stamps ([`Stamps::of`]) fit in a `u32` far beyond.
+const MAX_POINTS: usize = 1 << 28;
 
 /// Makes room for `n` more items in `v` (for [`push_if_in_room`]).
 #[inline(always)]

@@ -739,6 +739,7 @@ impl Delaunay {
         let (mut order, mut rounds) = brio_order(&hilbert);
         extremes_first(&vertices, &mut order, &mut rounds);
         let capacity = 8 * vertices.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
+        let parallel = in_parallel(opts.threads, vertices.len());
         let mut times = DelaunayTimes {
             ordering: start.elapsed(),
             ..Default::default()
@@ -754,7 +755,7 @@ impl Delaunay {
                 .map(|&i| vertices[i as usize])
                 .collect_into_vec(&mut sorted);
             let (mut dt, filled) =
-                Builder::new(sorted, order.clone(), capacity, scale)?.run(&rounds, opts);
+                Builder::new(sorted, order.clone(), capacity, parallel, scale)?.run(&rounds, opts);
             // `finish` timed the output stage (the hull check alone for a failed attempt).
             times.output += dt.stats.times.output;
             times.insertion += t.elapsed() - dt.stats.times.output;
@@ -816,9 +817,10 @@ impl Delaunay {
 /// tets; no waiting: a busy lock makes the insertion back off). The fields are atomics so
 /// that this needs no `unsafe`; relaxed accesses are plain loads and stores.
 ///
-/// All-zero bytes are a free slot ([`DEAD`]), so the arena is allocated zeroed:
-/// its pages cost nothing until a worker first uses them, and slots never used are never
-/// touched (filling a 30 MB arena up front took 20-30 ms of one thread at 100k points).
+/// All-zero bytes are a free slot ([`DEAD`]). The parallel phase's arena is allocated zeroed:
+/// fresh pages from the system cost nothing until a worker first uses them, and slots never
+/// used are never touched (filling a 30 MB arena up front took 20-30 ms of one thread at 100k
+/// points). One thread writes its free slots a block at a time instead ([`Builder::new`]).
 #[derive(bytemuck::Zeroable)]
 struct Tet {
     v: [AtomicU32; 4],
@@ -951,8 +953,17 @@ unsafe fn push_if_in_room<T: Copy>(v: &mut Vec<T>, x: T, keep: bool) {
     }
 }
 
+/// The free slots a one-thread insertion writes at a time when it runs out (147 KB: they are
+/// filled by the next ~600 insertions while still in the cache; see [`Builder::new`]).
+const FRESH_BLOCK: usize = 4096;
+
 /// Inputs smaller than this are triangulated by one thread.
 const PARALLEL_MIN_POINTS: usize = 8192;
+
+/// Whether `n` distinct points are inserted by `threads` workers (see [`Builder::run`]).
+fn in_parallel(threads: usize, n: usize) -> bool {
+    threads.clamp(1, 64) > 1 && n >= PARALLEL_MIN_POINTS
+}
 
 /// Why an insertion backed off (nothing was changed).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1977,19 +1988,29 @@ struct Builder {
     n_real: u32,
     static_eps: f64,
     static_orient_eps: f64,
-    /// The tet arena, allocated zeroed (free slots); `tets[..used]` have been handed out.
+    /// The tet arena: `tets[..used]` have been handed out, the slots after them are free
+    /// ([`DEAD`]); room for more is reserved (see [`Builder::new`]).
     tets: Vec<Tet>,
     used: usize,
 }
 
 impl Builder {
     /// A builder with the super-tetrahedron (`super_scale` times the input's extent from its
-    /// centre, see [`SUPER_SCALES`]) and a zeroed arena of `capacity` slots (more are added
-    /// when needed).
+    /// centre, see [`SUPER_SCALES`]) and room for `capacity` tets (more are added when
+    /// needed).
+    ///
+    /// With `zeroed`, the arena's `capacity` slots are allocated zeroed (free) at once, as
+    /// the parallel phase needs: its workers take slots from one pool and may look at any
+    /// of them. Without it (one thread), only the room is reserved, and [`Builder::reserve`]
+    /// writes the free slots a few thousand at a time, just before the insertions fill them.
+    /// An allocator that serves the arena from memory freed before must clear it for a zeroed
+    /// allocation: a pass over the whole arena (29 MB at 100k points) whose lines have left
+    /// the caches again by the time they are filled.
     fn new(
         mut pos: Vec<[f64; 3]>,
         rank: Vec<u32>,
         capacity: usize,
+        zeroed: bool,
         super_scale: f64,
     ) -> Result<Self> {
         let n_real = pos.len() as u32;
@@ -2032,8 +2053,16 @@ impl Builder {
         {
             tet.swap(0, 1);
         }
-        let tets: Vec<Tet> = bytemuck::allocation::try_zeroed_vec(capacity.max(1))
-            .map_err(|_| Error::InvalidInput(format!("no memory for {capacity} tetrahedra")))?;
+        let no_memory = || Error::InvalidInput(format!("no memory for {capacity} tetrahedra"));
+        let tets: Vec<Tet> = if zeroed {
+            bytemuck::allocation::try_zeroed_vec(capacity.max(1)).map_err(|_| no_memory())?
+        } else {
+            let mut tets = Vec::new();
+            tets.try_reserve_exact(capacity.max(1))
+                .map_err(|_| no_memory())?;
+            tets.push(Tet::dead());
+            tets
+        };
         for k in 0..4 {
             tets[0].v[k].store(tet[k], Relaxed);
             tets[0].set_nbr(k, NONE);
@@ -2063,12 +2092,16 @@ impl Builder {
         }
     }
 
-    /// Hands out `count` never-used slots (the arena grows when it has fewer).
+    /// Hands out `count` never-used slots (written free here if they were not yet; the
+    /// room grows by half when it is too small).
     fn reserve(&mut self, count: usize) -> (u32, u32) {
         let end = self.used + count;
         if end > self.tets.len() {
-            let len = end.max(self.tets.len() + self.tets.len() / 2);
-            self.tets.resize_with(len, Tet::dead);
+            if end > self.tets.capacity() {
+                let room = end.max(self.tets.capacity() + self.tets.capacity() / 2);
+                self.tets.reserve_exact(room - self.tets.len());
+            }
+            self.tets.resize_with(end, Tet::dead);
         }
         let start = std::mem::replace(&mut self.used, end);
         (start as u32, end as u32)
@@ -2093,9 +2126,10 @@ impl Builder {
                 match result {
                     Ok(()) => break,
                     Err(_) => {
-                        // Half again as many slots, within the zeroed arena while it lasts.
+                        // Half again as many slots within the slots already written free,
+                        // else `FRESH_BLOCK` more (see `Builder::new`).
                         let room = self.tets.len() - self.used;
-                        let count = (self.used / 2).max(1024).min(room.max(1024));
+                        let count = (self.used / 2).max(1024).min(room.max(FRESH_BLOCK));
                         self.grow(w, count);
                     }
                 }
@@ -2114,7 +2148,7 @@ impl Builder {
         let mut main = Worker::new(1, 12345);
         main.avx2 = avx2_insertion(opts);
         let threads = opts.threads.clamp(1, 64);
-        if threads == 1 || n < PARALLEL_MIN_POINTS {
+        if !in_parallel(threads, n) {
             self.insert_sequential(&mut main, 0..self.n_real);
             return self.finish(DelaunayStats {
                 workers: 1,

@@ -620,6 +620,30 @@ fn tets_fill_the_convex_hull() {
     }
 }
 
+/// Points on two skew lines have a quadratic number of tets: each pair of consecutive points
+/// on one line with each pair on the other, (150 - 1)^2 = 22,201 here, well past the arena's
+/// first room (8 slots per point and a few thousand more), so the arena grows while the
+/// insertion runs (with one thread its free slots are written a block at a time, see
+/// `Builder::reserve`).
+#[test]
+fn the_arena_grows_past_its_first_room() {
+    let m = 150;
+    let mut pts = Vec::new();
+    for i in 0..m {
+        // Uneven steps, so that no pattern of the spacing repeats.
+        let t = i as f64 + 0.3 * ((i * i) % 7) as f64 / 7.0;
+        pts.push([t, 0.0, 0.0]);
+        pts.push([0.0, 0.7 * t, 50.0]);
+    }
+    for threads in [1, 2] {
+        let dt = Delaunay::with_threads(&pts, threads).unwrap();
+        assert_eq!(dt.tets.len(), (m - 1) * (m - 1), "{threads} threads");
+        check_structure(&dt);
+        check_fills_hull(&dt);
+    }
+    check_empty_spheres(&Delaunay::new(&pts).unwrap());
+}
+
 /// A slab 1e-12 thick needs a super-tetrahedron larger than the first one tried (2^30
 /// extents): the first result fails the hull check and the points are triangulated again.
 /// Four points of a tet 1e-30 or 1e-40 high (its circumradius up to ~2^133 extents) need the

@@ -89,12 +89,17 @@ fn write_points(path: &Path, pts: &[[f64; 3]]) -> Result<()> {
 const USAGE: &str = "\
 Delaunay alone: one worker, then one per rayon thread (RAYON_NUM_THREADS), best of 5.
 
-usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [FILE ...]
+usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-freed-memory] [FILE ...]
 
   FILE         a point file (raw little-endian f64 x, y, z triples) or a PoNQ .npz (its v*);
                without files: random points (10k, 100k, 400k), lattices (30^3, 47^3) and the
                example PoNQ's v*. Cargo runs benches in the package folder: give absolute paths.
   --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
+  --keep-freed-memory
+               the allocator setting of the ponq-* programs (ponq_mesh::memory): freed blocks
+               up to 32 MiB are kept for the next allocation, so the runs after the first reuse
+               memory instead of taking fresh pages (each costs a page fault on first touch,
+               about 1.6 us per 4 KB page on this machine); without it glibc decides by size
   -h, --help   this text
 
 Columns: tets, time and microseconds per point on one and on all threads (the whole call, and
@@ -105,12 +110,14 @@ see DelaunayStats::times; best of 5 each), the ordering and output stages on all
 super-tetrahedron.";
 
 fn main() -> Result<()> {
-    let args = args::parse(USAGE, &["--write"]);
+    let args = args::parse(USAGE, &["--write", "--keep-freed-memory"]);
     let mut write_dir: Option<PathBuf> = None;
     let mut files = Vec::new();
     let mut it = args.iter();
     while let Some(a) = it.next() {
-        if a == "--write" {
+        if a == "--keep-freed-memory" {
+            ponq_mesh::memory::keep_freed_memory();
+        } else if a == "--write" {
             match it.next() {
                 Some(dir) => write_dir = Some(PathBuf::from(dir)),
                 None => {

@@ -1271,22 +1271,32 @@ impl Worker {
                 // has AVX2.
                 let (negative, undecided) =
                     unsafe { orient3d_faces_avx2(tv.map(|x| sh.p(x)), p, eps) };
-                // With an open face undecided, one by one below (rare: ties, the hull).
-                if undecided & open == 0 {
-                    let seen = negative & open;
-                    // The faces in the order r, r + 1, ...: bit j is face (r + j) & 3.
-                    let rotated = ((seen >> r) | (seen << (4 - r))) & 0xF;
-                    if rotated == 0 {
-                        debug_assert!(
-                            PAR || (0..4).all(|k| sh.face_sees(tv, k, p) >= 0),
-                            "the walk ended outside tet {t}"
-                        );
-                        return Some(t);
+                let mut seen = negative & open;
+                // An open face the static bound leaves undecided gets the exact test (ties,
+                // near-flat tets, the hull; on a CAD PoNQ's v*, points coplanar with a face
+                // of a flat region): all such faces, so that the first face in the walk's
+                // order that sees `p` from behind is known, as one by one. The decided faces
+                // keep their lanes' signs.
+                let pending = undecided & open;
+                if pending != 0 {
+                    for k in 0..4 {
+                        if (pending >> k) & 1 == 1 && sh.face_sees(tv, k, p) < 0 {
+                            seen |= 1 << k;
+                        }
                     }
-                    prev = t;
-                    t = tn[(r + rotated.trailing_zeros() as usize) & 3];
-                    continue;
                 }
+                // The faces in the order r, r + 1, ...: bit j is face (r + j) & 3.
+                let rotated = ((seen >> r) | (seen << (4 - r))) & 0xF;
+                if rotated == 0 {
+                    debug_assert!(
+                        PAR || (0..4).all(|k| sh.face_sees(tv, k, p) >= 0),
+                        "the walk ended outside tet {t}"
+                    );
+                    return Some(t);
+                }
+                prev = t;
+                t = tn[(r + rotated.trailing_zeros() as usize) & 3];
+                continue;
             }
             let mut next = NONE;
             for j in 0..4 {

@@ -1236,7 +1236,9 @@ impl Worker {
     /// [`Worker::walk`] with AVX2: the four faces of a tet are tested together
     /// ([`orient3d_faces_avx2`]), then the first face in the walk's random order that sees
     /// `p` from behind is taken without a branch per face (each face's sign goes either way
-    /// about as often). The same faces are chosen as one by one, so the same walk.
+    /// about as often). Where the static bound decides every open face, the same face is
+    /// chosen as one by one; where it does not, a decided face that sees `p` goes first (see
+    /// the body), so the walk may differ there, and ends in a tet containing `p` all the same.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn walk_avx2<const PAR: bool>(&mut self, sh: &Shared, t: u32, p: &[f64; 3]) -> Option<u32> {
@@ -1272,13 +1274,16 @@ impl Worker {
                 let (negative, undecided) =
                     unsafe { orient3d_faces_avx2(tv.map(|x| sh.p(x)), p, eps) };
                 let mut seen = negative & open;
-                // An open face the static bound leaves undecided gets the exact test (ties,
-                // near-flat tets, the hull; on a CAD PoNQ's v*, points coplanar with a face
-                // of a flat region): all such faces, so that the first face in the walk's
-                // order that sees `p` from behind is known, as one by one. The decided faces
-                // keep their lanes' signs.
+                // The open faces the static bound leaves undecided (ties, near-flat tets, the
+                // hull; on a CAD PoNQ's v*, points coplanar with faces of flat regions: 30% of
+                // the steps on the mesher's 109k v*) get the exact test only where no decided
+                // face sees `p` from behind: the walk goes through a face that does, decided
+                // or not, so it is a visibility walk (which ends in a Delaunay
+                // triangulation), and it ends only where no face does, exactly. (Exact tests
+                // of every undecided face, to take the first face of the random order as one
+                // by one: 1.8 per insertion on those v*; this way 0.6, and 3% fewer steps.)
                 let pending = undecided & open;
-                if pending != 0 {
+                if pending != 0 && seen == 0 {
                     for k in 0..4 {
                         if (pending >> k) & 1 == 1 && sh.face_sees(tv, k, p) < 0 {
                             seen |= 1 << k;

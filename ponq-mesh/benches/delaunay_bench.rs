@@ -1,5 +1,7 @@
-//! Delaunay benchmark: random points in a cube, exact lattices (all co-spherical) and the v*
-//! of a real PoNQ (the shipped example's PoNQ at 64^3, if present).
+//! Delaunay benchmark: random points in a cube, exact lattices (all co-spherical) and the
+//! points the mesher triangulates for a real PoNQ (the shipped example's PoNQ at 64^3, if
+//! present: its v* and the corners of the protective box, `mesher::delaunay_points`; and its
+//! v* alone, whose convex hull is the part's own).
 //!
 //! ```sh
 //! cargo bench -p ponq-mesh --bench delaunay_bench                     # the built-in sets
@@ -8,10 +10,11 @@
 //! ponq-mesh/benches/cgal/side_by_side.sh                              # the same points in CGAL
 //! ```
 //!
-//! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5. Each
-//! is timed as a whole and by its insertion stage alone (`DelaunayStats::times`: without the
-//! Hilbert ordering and the canonical output).
-//! A `.npz` file is a PoNQ (its v* are triangulated); any other point file is raw
+//! One worker, then one per rayon thread (`RAYON_NUM_THREADS` sets how many); best of 5
+//! (`--runs`). Each is timed as a whole and by its insertion stage alone
+//! (`DelaunayStats::times`: without the Hilbert ordering and the canonical output).
+//! A `.npz` file is a PoNQ (the mesher's points for it are triangulated, or its v* alone with
+//! `--vstars-only`); any other point file is raw
 //! little-endian `f64` x, y, z triples (what `--write` writes and
 //! `benches/cgal/delaunay_cgal.cpp` reads).
 
@@ -20,10 +23,27 @@ mod args;
 
 use anyhow::{Context, Result, ensure};
 use ponq_mesh::delaunay::{Delaunay, DelaunayStats};
+use ponq_mesh::mesher::{MeshingOptions, delaunay_points};
+use ponq_mesh::ponq::Ponq;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-fn built_in_sets() -> Vec<(String, Vec<[f64; 3]>)> {
+/// The points the mesher triangulates for a PoNQ ([`delaunay_points`], the default domain
+/// `[-1, 1]^3`), or its v* alone.
+fn ponq_points(ponq: &Ponq, vstars_only: bool) -> Vec<[f64; 3]> {
+    let v = ponq.vstars();
+    if vstars_only {
+        v
+    } else {
+        delaunay_points(&v, &MeshingOptions::default())
+    }
+}
+
+/// Named point sets.
+type Sets = Vec<(String, Vec<[f64; 3]>)>;
+
+/// The built-in point sets, and the PoNQ they read (kept until the end, see [`read_points`]).
+fn built_in_sets() -> (Sets, Vec<Ponq>) {
     let mut s = 1u64;
     let mut r = || {
         s ^= s << 13;
@@ -32,6 +52,7 @@ fn built_in_sets() -> Vec<(String, Vec<[f64; 3]>)> {
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
     let mut sets = Vec::new();
+    let mut ponqs = Vec::new();
     for n in [10_000usize, 100_000, 400_000] {
         let pts: Vec<[f64; 3]> = (0..n).map(|_| [r(), r(), r()]).collect();
         sets.push((format!("random_{n}"), pts));
@@ -50,32 +71,40 @@ fn built_in_sets() -> Vec<(String, Vec<[f64; 3]>)> {
     let ponq = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/example001_ponq_64.npz");
     match ponq_mesh::io::npz::read_ponq(&ponq) {
         Ok(p) => {
-            let v = p.vstars();
-            sets.push((format!("ponq_example001_64_{}", v.len()), v));
+            let v = ponq_points(&p, false);
+            sets.push((format!("ponq_example001_64_box_{}", v.len()), v));
+            let v = ponq_points(&p, true);
+            sets.push((format!("ponq_example001_64_vstars_{}", v.len()), v));
+            ponqs.push(p);
         }
         Err(e) => eprintln!("skipping the PoNQ set ({}): {e}", ponq.display()),
     }
-    sets
+    (sets, ponqs)
 }
 
+/// Reads a raw point file straight into the points (no byte buffer freed before the timed
+/// calls, whose tet arena could reuse it: the first call's arena is fresh memory, as in a
+/// `ponq-mesh` run).
 fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
-    let bytes = std::fs::read(path)
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)
         .with_context(|| format!("cannot read point file {}", path.display()))?;
+    let len = file
+        .metadata()
+        .with_context(|| format!("cannot read point file {}", path.display()))?
+        .len();
     ensure!(
-        bytes.len().is_multiple_of(24),
+        len.is_multiple_of(24),
         "{}: not a whole number of f64 triples",
         path.display()
     );
-    Ok(bytes
-        .chunks_exact(24)
-        .map(|c| {
-            let mut p = [0.0; 3];
-            for (x, b) in p.iter_mut().zip(c.chunks_exact(8)) {
-                *x = f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
-            }
-            p
-        })
-        .collect())
+    let mut pts = vec![[0.0f64; 3]; (len / 24) as usize];
+    file.read_exact(bytemuck::cast_slice_mut(&mut pts))
+        .with_context(|| format!("cannot read point file {}", path.display()))?;
+    for x in pts.iter_mut().flatten() {
+        *x = f64::from_bits(u64::from_le(x.to_bits()));
+    }
+    Ok(pts)
 }
 
 fn write_points(path: &Path, pts: &[[f64; 3]]) -> Result<()> {
@@ -87,14 +116,25 @@ fn write_points(path: &Path, pts: &[[f64; 3]]) -> Result<()> {
 }
 
 const USAGE: &str = "\
-Delaunay alone: one worker, then one per rayon thread (RAYON_NUM_THREADS), best of 5.
+Delaunay alone: one worker, then one per rayon thread (RAYON_NUM_THREADS), best of 5 (--runs).
 
-usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-freed-memory] [FILE ...]
+usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-freed-memory]
+         [--vstars-only] [--runs N] [FILE ...]
 
-  FILE         a point file (raw little-endian f64 x, y, z triples) or a PoNQ .npz (its v*);
-               without files: random points (10k, 100k, 400k), lattices (30^3, 47^3) and the
-               example PoNQ's v*. Cargo runs benches in the package folder: give absolute paths.
+  FILE         a point file (raw little-endian f64 x, y, z triples) or a PoNQ .npz (the points
+               the mesher triangulates for it: its v* and the 8 corners of the protective box
+               around the domain [-1, 1]^3); without files: random points (10k, 100k, 400k),
+               lattices (30^3, 47^3) and the example PoNQ's points, with the box and without.
+               Cargo runs benches in the package folder: give absolute paths.
+  --vstars-only
+               a PoNQ .npz's v* alone, without the box: their convex hull is then the part's
+               own, a rounding from flat on CAD faces, and its tets touch the super-tetrahedron,
+               whose far vertices leave the filters undecided (the mesher never triangulates
+               these points; a library user of Delaunay::new may)
   --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
+  --runs N     time each set N times on one worker and N times on all, print the best of
+               each (default 5); --runs 1 in a new process times the first call alone, whose
+               tet arena is fresh memory from the system (as in a ponq-mesh run)
   --keep-freed-memory
                the allocator setting of the ponq-* programs (ponq_mesh::memory): freed blocks
                up to 32 MiB are kept for the next allocation, so the runs after the first reuse
@@ -104,19 +144,34 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-
 
 Columns: tets, time and microseconds per point on one and on all threads (the whole call, and
 its insertion stage alone: without the ordering before it and the canonical output after it,
-see DelaunayStats::times; best of 5 each), the ordering and output stages on all threads
-(best of 5 each), insertions that backed off and vertices left to the final one-thread pass
+see DelaunayStats::times; best of the runs each), the ordering and output stages on all
+threads (best of the runs each), insertions that backed off and vertices left to the final one-thread pass
 (\"stopped\": the workers stopped early, too many backed off), rebuilds with a larger
 super-tetrahedron.";
 
 fn main() -> Result<()> {
-    let args = args::parse(USAGE, &["--write", "--keep-freed-memory"]);
+    let args = args::parse(
+        USAGE,
+        &["--write", "--keep-freed-memory", "--vstars-only", "--runs"],
+    );
+    let mut runs = 5usize;
     let mut write_dir: Option<PathBuf> = None;
+    let mut vstars_only = false;
     let mut files = Vec::new();
     let mut it = args.iter();
     while let Some(a) = it.next() {
         if a == "--keep-freed-memory" {
             ponq_mesh::memory::keep_freed_memory();
+        } else if a == "--vstars-only" {
+            vstars_only = true;
+        } else if a == "--runs" {
+            match it.next().map(|n| n.parse::<usize>()) {
+                Some(Ok(n)) if n >= 1 => runs = n,
+                _ => {
+                    eprintln!("error: --runs needs a whole number of at least 1\n\n{USAGE}");
+                    std::process::exit(2);
+                }
+            }
         } else if a == "--write" {
             match it.next() {
                 Some(dir) => write_dir = Some(PathBuf::from(dir)),
@@ -129,22 +184,28 @@ fn main() -> Result<()> {
             files.push(PathBuf::from(a));
         }
     }
-    let sets: Vec<(String, Vec<[f64; 3]>)> = if files.is_empty() {
+    // The PoNQs stay until the end, as in a `ponq-mesh` run (freed, their memory would serve
+    // the first call's tet arena).
+    let (sets, _ponqs): (Sets, Vec<Ponq>) = if files.is_empty() {
         built_in_sets()
     } else {
-        files
+        let mut ponqs = Vec::new();
+        let sets = files
             .iter()
             .map(|f| {
                 let pts = if f.extension().is_some_and(|e| e == "npz") {
-                    ponq_mesh::io::npz::read_ponq(f)
-                        .with_context(|| format!("cannot read {}", f.display()))?
-                        .vstars()
+                    let ponq = ponq_mesh::io::npz::read_ponq(f)
+                        .with_context(|| format!("cannot read {}", f.display()))?;
+                    let pts = ponq_points(&ponq, vstars_only);
+                    ponqs.push(ponq);
+                    pts
                 } else {
                     read_points(f)?
                 };
                 Ok((f.display().to_string(), pts))
             })
-            .collect::<Result<_>>()?
+            .collect::<Result<_>>()?;
+        (sets, ponqs)
     };
     if let Some(dir) = &write_dir {
         std::fs::create_dir_all(dir)
@@ -159,13 +220,13 @@ fn main() -> Result<()> {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
-        // The best whole call and, apart, the best of each stage, of 5 (seconds: whole call,
-        // ordering, insertion, output).
+        // The best whole call and, apart, the best of each stage, of `runs` (seconds: whole
+        // call, ordering, insertion, output).
         let time = |workers: usize| -> Result<_> {
             let mut best = [f64::MAX; 4];
             let mut tets = 0;
             let mut stats = DelaunayStats::default();
-            for _ in 0..5 {
+            for _ in 0..runs {
                 let t = Instant::now();
                 let dt = Delaunay::with_threads(pts, workers)
                     .with_context(|| format!("cannot triangulate {name}"))?;

@@ -425,6 +425,48 @@ fn weld(dt: &Delaunay, m: usize, vstars: &mut [[f64; 3]], tol: f64) -> usize {
     moved
 }
 
+/// The points the mesher triangulates for the v* `vstars`: the v*, then the eight corners of
+/// the protective box (the domain of `opts`, enlarged by one cell, `extent / grid_scale`, on
+/// each side where some v* reaches its boundary). The corners form the convex hull, so no
+/// tet of the v* touches the Delaunay's super-tetrahedron (see [`crate::delaunay`]).
+/// `delaunay_bench` times the Delaunay on these points.
+///
+/// ```
+/// use ponq_mesh::mesher::{delaunay_points, MeshingOptions};
+/// let pts = delaunay_points(&[[0.0, 0.5, 0.0], [0.25, 0.0, 1.0]], &MeshingOptions::default());
+/// assert_eq!(pts.len(), 10);
+/// assert_eq!(pts[2], [-1.0, -1.0, -1.0]);
+/// // The second v* is on the domain's top face: the box grows by a cell (2 / 32) there.
+/// assert_eq!(pts[9], [1.0, 1.0, 1.0625]);
+/// ```
+pub fn delaunay_points(vstars: &[[f64; 3]], opts: &MeshingOptions) -> Vec<[f64; 3]> {
+    let (dlo, dhi) = opts.domain;
+    let extent = (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
+    let cell = extent / opts.grid_scale;
+    // Protective box: the domain, enlarged by a cell where some v* leaves it.
+    let (mut lo, mut hi) = (dlo, dhi);
+    for p in vstars {
+        for k in 0..3 {
+            if p[k] <= lo[k] {
+                lo[k] = p[k] - cell;
+            }
+            if p[k] >= hi[k] {
+                hi[k] = p[k] + cell;
+            }
+        }
+    }
+    let mut points = Vec::with_capacity(vstars.len() + 8);
+    points.extend_from_slice(vstars);
+    for i in 0..8 {
+        points.push([
+            if i & 1 == 0 { lo[0] } else { hi[0] },
+            if i & 2 == 0 { lo[1] } else { hi[1] },
+            if i & 4 == 0 { lo[2] } else { hi[2] },
+        ]);
+    }
+    points
+}
+
 /// What one pass of the mesher (Delaunay to extraction) gives.
 struct Pass {
     cx: TetComplex,
@@ -450,35 +492,17 @@ fn mesh_pass(
     stats: &mut MeshingStats,
 ) -> Result<Pass> {
     let t0 = Instant::now();
+    let points = delaunay_points(vstars, opts);
     let (dlo, dhi) = opts.domain;
     let extent = (0..3).map(|k| dhi[k] - dlo[k]).fold(0.0, f64::max);
     let cell = extent / opts.grid_scale;
-    // Protective box: the domain, enlarged by a cell where some v* leaves it.
-    let (mut lo, mut hi) = (dlo, dhi);
-    for p in vstars {
-        for k in 0..3 {
-            if p[k] <= lo[k] {
-                lo[k] = p[k] - cell;
-            }
-            if p[k] >= hi[k] {
-                hi[k] = p[k] + cell;
-            }
-        }
-    }
+    // The protective box's centre (its corners are the last eight points).
+    let (lo, hi) = (points[vstars.len()], points[vstars.len() + 7]);
     let centre = [
         0.5 * (lo[0] + hi[0]),
         0.5 * (lo[1] + hi[1]),
         0.5 * (lo[2] + hi[2]),
     ];
-    let mut points = Vec::with_capacity(vstars.len() + 8);
-    points.extend_from_slice(vstars);
-    for i in 0..8 {
-        points.push([
-            if i & 1 == 0 { lo[0] } else { hi[0] },
-            if i & 2 == 0 { lo[1] } else { hi[1] },
-            if i & 4 == 0 { lo[2] } else { hi[2] },
-        ]);
-    }
     stats.times.prepare += t0.elapsed();
 
     let t1 = Instant::now();

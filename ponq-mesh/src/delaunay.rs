@@ -171,15 +171,7 @@ impl Default for DelaunayOptions {
 /// Whether the insertion runs [`Worker::insert_avx2`]: on x86-64 CPUs with AVX2, unless
 /// `opts.portable`.
 fn avx2_insertion(opts: &DelaunayOptions) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        !opts.portable && std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let _ = opts;
-        false
-    }
+    !opts.portable && crate::cpu::has_avx2()
 }
 
 /// SplitMix64: a tiny deterministic generator for the insertion order and walk.
@@ -292,7 +284,7 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
     });
     let cell = |p: &[f64; 3], k: usize| (((p[k] - lo[k]) * scale[k]) as u32).min((1 << BITS) - 1);
     #[cfg(target_arch = "x86_64")]
-    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    let avx2 = crate::cpu::has_avx2();
     // Eight points at a time: the keys of 109k points took 2.4 ms on two threads one by one.
     let mut keys = vec![(0u64, 0u32); pts.len()];
     keys.par_chunks_mut(4096)
@@ -305,7 +297,7 @@ fn hilbert_keys(pts: &[[f64; 3]]) -> Vec<(u64, u32)> {
                     std::array::from_fn(|l| pts.get(l).map_or(0, |p| cell(p, k)))
                 });
                 #[cfg(target_arch = "x86_64")]
-                // SAFETY: the CPU has AVX2 (`avx2` was detected).
+                // SAFETY: the CPU has AVX2 (`cpu::has_avx2`).
                 let h = if avx2 {
                     unsafe { hilbert_index8_avx2(x, BITS) }
                 } else {

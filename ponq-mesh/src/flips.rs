@@ -95,10 +95,7 @@ struct VertexData<'a> {
 
 impl<'a> VertexData<'a> {
     fn new(quadrics: &'a [Quadric], normals: &'a [[f64; 3]], index: Option<&'a [u32]>) -> Self {
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
+        let avx2 = crate::cpu::has_avx2();
         Self {
             quadrics,
             normals,

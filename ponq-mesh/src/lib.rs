@@ -23,6 +23,7 @@
 pub mod bvh;
 pub mod complex;
 pub mod cover_grid;
+pub mod cpu;
 pub mod cut;
 pub mod delaunay;
 pub mod error;

@@ -68,8 +68,8 @@ fn tag_every_tet(cx: &TetComplex) -> Vec<Label> {
     use rayon::prelude::*;
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
+        if crate::cpu::has_avx2() {
+            // SAFETY: the CPU has AVX2 (`has_avx2`).
             return tag_in_blocks::<4>(cx, |t0| unsafe { tag_lanes_avx2(cx, t0) });
         }
     }

@@ -205,6 +205,54 @@ fn cli_meshes_the_shipped_example() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The same file, byte for byte, with the AVX2 paths (where the CPU has them) and with the
+/// portable code everywhere (`PONQ_NO_AVX2`, see `ponq_mesh::cpu`): the Delaunay's walk and
+/// conflict lanes, the Hilbert keys, the tagging's and the flips' lanes, on both example
+/// PoNQs, PoNQ-lite included.
+#[test]
+fn cli_output_does_not_depend_on_the_avx2_paths() {
+    #[cfg(target_arch = "x86_64")]
+    let avx2_cpu = std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2_cpu = false;
+    let dir = std::env::temp_dir().join(format!("ponq-cli-avx2-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (file, grid, extra) in [
+        ("example001_ponq_64.npz", "64", &[][..]),
+        ("example001_ponq_64.npz", "64", &["--lite"][..]),
+        ("csg_ponq_32.npz", "32", &[][..]),
+    ] {
+        let mut files = Vec::new();
+        for portable in ["0", "1"] {
+            let out = dir.join(format!("p{portable}.obj"));
+            let o = bin()
+                .env("PONQ_NO_AVX2", portable)
+                .arg(example(file))
+                .arg("-o")
+                .arg(&out)
+                .args(["--grid-scale", grid, "--no-check"])
+                .args(extra)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            // The portable run says so; the other takes the AVX2 paths where the CPU has them.
+            let stdout = String::from_utf8_lossy(&o.stdout);
+            let avx2 = portable == "0" && avx2_cpu;
+            assert!(
+                stdout.contains(if avx2 { "AVX2 paths" } else { "portable code" }),
+                "{stdout}"
+            );
+            files.push(std::fs::read(&out).unwrap());
+        }
+        assert!(files[0].len() > 1000);
+        assert!(
+            files[0] == files[1],
+            "{file} {extra:?}: the meshes differ with PONQ_NO_AVX2"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The same file, byte for byte, with one worker thread and with three (the Delaunay's
 /// canonical order and deterministic later stages), crease flips on and off.
 #[test]

@@ -19,7 +19,14 @@ use ponq_mesh::validity;
 /// (float32 or float64) and optionally `vstars` (M,3), in the frame of the grid domain
 /// (the [-1,1]^3 box unless --bounds says otherwise).
 #[derive(Parser, Debug)]
-#[command(version, about, long_about)]
+#[command(
+    version,
+    about,
+    long_about,
+    after_help = "Environment: PONQ_NO_AVX2=1 runs the portable code instead of the AVX2 \
+                  paths (the same mesh, slower); RAYON_NUM_THREADS sets the worker threads where \
+                  --threads is not given."
+)]
 struct Args {
     /// Input PoNQ file (.npz).
     input: PathBuf,
@@ -172,7 +179,7 @@ fn run(args: &Args) -> Result<bool> {
             println!("note: {msg}");
         }
         println!(
-            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips; {} worker threads",
+            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips; {} worker threads, {}",
             s.tets,
             s.tagged[0],
             s.tagged[1],
@@ -181,7 +188,12 @@ fn run(args: &Args) -> Result<bool> {
             s.cut.edges,
             s.manifold.flipped_tets,
             s.flips.flips,
-            rayon::current_num_threads()
+            rayon::current_num_threads(),
+            if ponq_mesh::cpu::has_avx2() {
+                "AVX2 paths"
+            } else {
+                "portable code (no AVX2, or PONQ_NO_AVX2 set)"
+            }
         );
         if s.welded > 0 {
             println!(

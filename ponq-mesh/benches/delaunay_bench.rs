@@ -145,9 +145,9 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-
 Columns: tets, time and microseconds per point on one and on all threads (the whole call, and
 its insertion stage alone: without the ordering before it and the canonical output after it,
 see DelaunayStats::times; best of the runs each), the ordering and output stages on all
-threads (best of the runs each), insertions that backed off and vertices left to the final one-thread pass
-(\"stopped\": the workers stopped early, too many backed off), rebuilds with a larger
-super-tetrahedron.";
+threads (best of the runs each), insertions that backed off and vertices left to the final
+one-thread pass (\"stopped\": the workers stopped early, too many backed off), rebuilds with a
+larger super-tetrahedron.";
 
 fn main() -> Result<()> {
     let args = args::parse(

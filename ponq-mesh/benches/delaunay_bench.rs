@@ -128,9 +128,8 @@ usage: cargo bench -p ponq-mesh --bench delaunay_bench -- [--write DIR] [--keep-
                Cargo runs benches in the package folder: give absolute paths.
   --vstars-only
                a PoNQ .npz's v* alone, without the box: their convex hull is then the part's
-               own, a rounding from flat on CAD faces, and its tets touch the super-tetrahedron,
-               whose far vertices leave the filters undecided (the mesher never triangulates
-               these points; a library user of Delaunay::new may)
+               own, with flat faces on CAD parts (the mesher never triangulates these points;
+               a library user of Delaunay::new may)
   --write DIR  also write the point sets as DIR/NAME.f64 (for CGAL and HXT: benches/cgal)
   --runs N     time each set N times on one worker and N times on all, print the best of
                each (default 5); --runs 1 in a new process times the first call alone, whose
@@ -146,8 +145,7 @@ Columns: tets, time and microseconds per point on one and on all threads (the wh
 its insertion stage alone: without the ordering before it and the canonical output after it,
 see DelaunayStats::times; best of the runs each), the ordering and output stages on all
 threads (best of the runs each), insertions that backed off and vertices left to the final
-one-thread pass (\"stopped\": the workers stopped early, too many backed off), rebuilds with a
-larger super-tetrahedron.";
+one-thread pass (\"stopped\": the workers stopped early, too many backed off).";
 
 fn main() -> Result<()> {
     let args = args::parse(
@@ -216,9 +214,9 @@ fn main() -> Result<()> {
     }
     let threads = rayon::current_num_threads();
     println!(
-        "| input | points | tets | 1 thread (ms) | us / point | insertion only | {threads} threads (ms) | us / point | insertion only | ordering / output (ms) | backed off / deferred | rebuilds |"
+        "| input | points | tets | 1 thread (ms) | us / point | insertion only | {threads} threads (ms) | us / point | insertion only | ordering / output (ms) | backed off / deferred |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, pts) in &sets {
         // The best whole call and, apart, the best of each stage, of `runs` (seconds: whole
         // call, ordering, insertion, output).
@@ -249,7 +247,7 @@ fn main() -> Result<()> {
             ""
         };
         println!(
-            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.2} | {:.1} | {:.2} | {:.2} | {:.1} / {:.1} | {} / {}{stopped} | {} |",
+            "| {name} | {} | {tets} | {:.1} | {:.2} | {:.2} | {:.1} | {:.2} | {:.2} | {:.1} / {:.1} | {} / {}{stopped} |",
             pts.len(),
             one * 1e3,
             per_point(one),
@@ -261,7 +259,6 @@ fn main() -> Result<()> {
             output * 1e3,
             stats.backed_off,
             stats.deferred,
-            stats.rebuilds,
         );
     }
     Ok(())

@@ -7,9 +7,15 @@
 //! with a stochastic visibility walk, on top of [`crate::predicates`]: exact orientation and
 //! insphere tests with Devillers-Teillaud symbolic perturbation, so co-spherical and coplanar
 //! inputs (lattices) give a valid triangulation with no flat tetrahedron and no jitter.
-//! The insertion starts from a super-tetrahedron far around the points; the result is checked
-//! to fill the convex hull and built again with a larger one when it does not
-//! ([`DelaunayStats::rebuilds`]; why and how: `SUPER_SCALES` in the source).
+//! The triangulation covers all of space, as CGAL's does: every face of the convex hull has an
+//! infinite tet, the face and one symbolic infinite vertex (no position). A point beyond a
+//! hull face is in conflict with that face's infinite tet; a point on the face's plane is in
+//! conflict with it where it is in conflict with the finite tet across the face (inside the
+//! face's circumcircle, ties broken by the same perturbation). The insertion starts from four
+//! affinely independent points, their tet and its four infinite tets. (Until 2026-12-05 it
+//! started from a super-tetrahedron of four far real points, which left the filters undecided
+//! along the hull and cut off the hull's flat tets, whose circumspheres reach far: the
+//! triangulation was then built again with a larger one.)
 //!
 //! Parallel insertion: after the first BRIO rounds, each worker thread takes one stretch of
 //! every later round's Hilbert order (so the workers are far apart in space), cut into chunks;
@@ -34,34 +40,15 @@ use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
 use crate::predicates::{
-    collinear, in_conflict_past_static, insphere_static_lanes, orient3d, orient3d_bounded,
-    static_insphere_bound, static_orient_bound,
+    collinear, in_conflict_bounded, in_conflict_past_static, insphere_static_lanes, orient3d,
+    orient3d_bounded, static_insphere_bound, static_orient_bound,
 };
 #[cfg(target_arch = "x86_64")]
 use crate::predicates::{insphere_static4_avx2, orient3d_faces_avx2};
 
-/// The sizes tried for the super-tetrahedron, in extents of the input, smallest first.
-///
-/// The insertion starts from one tetrahedron around all points. Its four vertices are real
-/// points, so a Delaunay tet of the input whose circumsphere reaches one of them is missing
-/// from the result: the flat tets along the convex hull, whose circumspheres can be huge (at
-/// 1000 extents, 13,870 of the 123,443 tets of 20k random points in a 1 x 1 x 1e-6 slab were
-/// missing, and 27 of 672k for random points in a cube). So the result is checked
-/// ([`Builder::fills_hull`]: its boundary must be closed, convex and through every vertex that
-/// touches the super-tetrahedron's tets) and built again with the next size when it is not.
-/// 2^30 suffices for random, slab, paraboloid and sphere point sets (CGAL's tet counts); a
-/// CAD PoNQ's v* alone, whose hull faces are a rounding from flat, need 2^90 (the mesher's
-/// never do: it adds an enclosing box, whose corners form the hull). The largest size, 2^190
-/// extents of at most 2^11, keeps every product of the predicates below 2^1005, inside the
-/// range of `f64`, where the exact stages decide what the filters cannot. Flatter still (a
-/// tet whose circumsphere reaches past that, e.g. a point 1e-40 off a triangle that is itself
-/// nearly a segment) is an error, not a triangulation with a tet missing.
-const SUPER_SCALES: [f64; 4] = [
-    (1u64 << 30) as f64,
-    (1u128 << 90) as f64,
-    (1u128 << 75) as f64 * (1u128 << 75) as f64,
-    (1u128 << 95) as f64 * (1u128 << 95) as f64,
-];
+/// The vertices of the first tet ([`Builder::new`]): the first four of the insertion order
+/// ([`independent_first`]), inserted before any other.
+const FIRST_TET: u32 = 4;
 
 /// Marker for "no neighbour" (a face on the boundary of the triangulated region).
 pub const NONE: u32 = u32::MAX;
@@ -115,9 +102,6 @@ pub struct DelaunayStats {
     /// Points with a coordinate set to 0 because it was too small next to the largest
     /// coordinate for exact predicates (see [`Delaunay::with_options`]).
     pub snapped: usize,
-    /// Times the triangulation was built again with a larger super-tetrahedron because the
-    /// first one cut tets off along the convex hull (almost always 0).
-    pub rebuilds: usize,
     /// Wall-clock time of each stage.
     pub times: DelaunayTimes,
 }
@@ -128,12 +112,10 @@ pub struct DelaunayTimes {
     /// Checking the input, merging duplicates and ordering the points for insertion (the
     /// Hilbert sort, the BRIO rounds).
     pub ordering: Duration,
-    /// Inserting the points: the tet arena, the super-tetrahedron, the walks and cavities
-    /// (all attempts when the triangulation was built again, see
-    /// [`DelaunayStats::rebuilds`]).
+    /// Inserting the points: the tet arena, the first tet, the walks and cavities.
     pub insertion: Duration,
-    /// The output: the check that the tets fill the convex hull, the tets in canonical form
-    /// and order with their neighbours, the input numbering restored.
+    /// The output: the finite tets in canonical form and order with their neighbours, the
+    /// input numbering restored.
     pub output: Duration,
 }
 
@@ -646,6 +628,12 @@ fn extremes_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usi
         .filter(|&(_, v)| extreme.contains(v))
         .map(|(j, _)| j)
         .collect();
+    move_to_front(order, rounds, &moved);
+}
+
+/// Moves the vertices at the (increasing) places `moved` of `order` to its front, in that
+/// order, the others keeping theirs; shifts the round starts `rounds` to match.
+fn move_to_front(order: &mut Vec<u32>, rounds: &mut [usize], moved: &[usize]) {
     // A round that started at `r > 0` now starts after all moved vertices and the others
     // before `r`.
     for r in rounds.iter_mut().filter(|r| **r > 0) {
@@ -654,12 +642,34 @@ fn extremes_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usi
     let mut moved_first = Vec::with_capacity(order.len());
     moved_first.extend(moved.iter().map(|&j| order[j]));
     let mut from = 0;
-    for &j in &moved {
+    for &j in moved {
         moved_first.extend_from_slice(&order[from..j]);
         from = j + 1;
     }
     moved_first.extend_from_slice(&order[from..]);
     *order = moved_first;
+}
+
+/// Moves four affinely independent vertices (exactly: the first in `order` that are, as
+/// [`Builder::new`]'s first tet needs) to the front of `order`, shifting `rounds` to match;
+/// `false` (nothing moved) when the vertices span no volume (all on one plane). After
+/// [`extremes_first`] the first four of the order almost always are.
+fn independent_first(vertices: &[[f64; 3]], order: &mut Vec<u32>, rounds: &mut [usize]) -> bool {
+    let p = |j: usize| &vertices[order[j] as usize];
+    // The vertices are distinct (duplicates merged), so the second one differs from the first.
+    if order.len() < 4 {
+        return false;
+    }
+    let Some(c) = (2..order.len()).find(|&j| !collinear(p(0), p(1), p(j))) else {
+        return false;
+    };
+    let Some(d) = (c + 1..order.len()).find(|&j| orient3d(p(0), p(1), p(c), p(j)) != 0) else {
+        return false;
+    };
+    if (c, d) != (2, 3) {
+        move_to_front(order, rounds, &[0, 1, c, d]);
+    }
+    true
 }
 
 impl Delaunay {
@@ -730,41 +740,24 @@ impl Delaunay {
         // insertions touch neighbouring memory; `finish` maps the numbers back.
         let (mut order, mut rounds) = brio_order(&hilbert);
         extremes_first(&vertices, &mut order, &mut rounds);
+        let spans = independent_first(&vertices, &mut order, &mut rounds);
         let capacity = 8 * vertices.len() + 4096 * (opts.threads.clamp(1, 64) + 1);
         let parallel = in_parallel(opts.threads, vertices.len());
         let mut times = DelaunayTimes {
             ordering: start.elapsed(),
             ..Default::default()
         };
-        let mut built = None;
-        for (attempt, &scale) in SUPER_SCALES.iter().enumerate() {
-            let t = Instant::now();
-            // In parallel (a gather through the insertion order), with room for the
-            // super-tetrahedron's four vertices, which `Builder::new` adds.
-            let mut sorted: Vec<[f64; 3]> = Vec::with_capacity(order.len() + 4);
-            order
-                .par_iter()
-                .map(|&i| vertices[i as usize])
-                .collect_into_vec(&mut sorted);
-            let (mut dt, filled) =
-                Builder::new(sorted, order.clone(), capacity, parallel, scale)?.run(&rounds, opts);
-            // `finish` timed the output stage (the hull check alone for a failed attempt).
-            times.output += dt.stats.times.output;
-            times.insertion += t.elapsed() - dt.stats.times.output;
-            dt.stats.rebuilds = attempt;
-            if filled {
-                built = Some(dt);
-                break;
-            }
-        }
-        let Some(mut dt) = built else {
-            return Err(Error::InvalidInput(format!(
-                "the {} points are too close to a plane for an exact tetrahedralisation: a \
-                 super-tetrahedron 2^190 times their extent still cuts off tets along the \
-                 convex hull",
-                vertices.len()
-            )));
-        };
+        let t = Instant::now();
+        // In parallel (a gather through the insertion order).
+        let mut sorted: Vec<[f64; 3]> = Vec::with_capacity(order.len() + 1);
+        order
+            .par_iter()
+            .map(|&i| vertices[i as usize])
+            .collect_into_vec(&mut sorted);
+        let mut dt = Builder::new(sorted, order, capacity, parallel, spans)?.run(&rounds, opts);
+        // `finish` timed the output stage.
+        times.output += dt.stats.times.output;
+        times.insertion += t.elapsed() - dt.stats.times.output;
         let t = Instant::now();
         if opts.merge_within > 0.0 {
             dt.stats.merged_near = points
@@ -969,7 +962,8 @@ enum Fail {
 /// What the workers share: the points (numbered in insertion order) and the tet arena.
 struct Shared<'a> {
     pos: &'a [[f64; 3]],
-    /// Input number of each real vertex (the super-tetrahedron's keep their own, larger ones).
+    /// Input number of each real vertex (the infinite vertex, numbered past them, is in no
+    /// perturbed test: see [`Worker::infinite_conflict`]).
     rank: &'a [u32],
     tets: &'a [Tet],
     n_real: u32,
@@ -1007,10 +1001,110 @@ impl Shared<'_> {
         &self.pos[v as usize]
     }
 
-    /// Whether all four vertices are real (not of the super-tetrahedron).
+    /// Whether all four vertices are real: a finite tet, not an infinite one (whose
+    /// infinite vertex is numbered `n_real`, see [`Builder::new`]).
     #[inline(always)]
     fn real(&self, tv: [u32; 4]) -> bool {
         tv[0].max(tv[1]).max(tv[2].max(tv[3])) < self.n_real
+    }
+
+    /// The position of the infinite vertex in infinite tet `tv`.
+    #[inline]
+    fn inf_at(&self, tv: [u32; 4]) -> usize {
+        (0..4).find(|&k| tv[k] >= self.n_real).unwrap_or(3)
+    }
+
+    /// The orientation of infinite tet `tv` with its infinite vertex replaced by the real
+    /// point `p`: positive where `p` is strictly beyond its finite face (the hull face).
+    #[inline]
+    fn beyond_hull_face(&self, tv: [u32; 4], p: &[f64; 3]) -> i32 {
+        let k = self.inf_at(tv);
+        let q = [0, 1, 2, 3].map(|j| if j == k { p } else { self.p(tv[j]) });
+        orient3d(q[0], q[1], q[2], q[3])
+    }
+
+    /// Whether tet `tv` holds the real point `p`: a finite tet, in its closed volume (no face
+    /// sees `p` from behind); an infinite tet, strictly beyond its hull face (so that it is
+    /// in conflict with `p`).
+    fn holds(&self, tv: [u32; 4], p: &[f64; 3]) -> bool {
+        if self.real(tv) {
+            (0..4).all(|k| self.face_sees(tv, k, p) >= 0)
+        } else {
+            self.beyond_hull_face(tv, p) > 0
+        }
+    }
+
+    /// Whether infinite tet `tv` is in conflict with vertex `v` (CGAL's rule for its
+    /// infinite vertex): `v` strictly beyond the tet's hull face; or on the face's plane and
+    /// strictly inside its circumcircle, ties broken by the perturbation of the finite tets.
+    /// On the plane this is the test of a finite tet through the face and any point `w` on
+    /// the inner side: its circumsphere meets the plane in the face's circumcircle, and in
+    /// the perturbation `w`'s term vanishes (`v` on the face's plane) while the others are
+    /// orientations of planes that are the face's, so they depend on `w`'s side only (the
+    /// finite tet across the face gives the same answer; this needs no look at it, so no
+    /// lock).
+    #[cold]
+    #[inline(never)]
+    fn infinite_conflict(&self, tv: [u32; 4], v: u32) -> bool {
+        let p = self.p(v);
+        let o = self.beyond_hull_face(tv, p);
+        if o != 0 {
+            return o > 0;
+        }
+        let k = self.inf_at(tv);
+        let f = APEX_FACE[k].map(|q| *self.p(tv[q]));
+        // A point well inside: the face's first vertex moved along an axis by the face's size
+        // plus the coordinate's magnitude (so that the coordinate does change, however far
+        // from 0 the face is), the axis nearest the face's normal first (as computed; `w` has
+        // the face's coordinates but one, which keeps the exact stages on their fast paths),
+        // whichever way is exactly on the inner side (orientation negative with `w` in the
+        // infinite vertex's place). Some axis is not parallel to the face, and one of its two
+        // ways is inside.
+        let (u, w) = (
+            [f[1][0] - f[0][0], f[1][1] - f[0][1], f[1][2] - f[0][2]],
+            [f[2][0] - f[0][0], f[2][1] - f[0][1], f[2][2] - f[0][2]],
+        );
+        let n = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        let size = (0..3)
+            .map(|j| u[j].abs().max(w[j].abs()))
+            .fold(0.0f64, f64::max);
+        let mut axes = [0, 1, 2];
+        axes.sort_by(|&x, &y| n[y].abs().total_cmp(&n[x].abs()));
+        let inner = axes
+            .iter()
+            .flat_map(|&j| {
+                let d = size + f[0][j].abs();
+                [d, -d].map(|d| {
+                    let mut w = f[0];
+                    w[j] += d;
+                    w
+                })
+            })
+            .find(|w| {
+                let q = [0, 1, 2, 3].map(|j| if j == k { w } else { self.p(tv[j]) });
+                orient3d(q[0], q[1], q[2], q[3]) < 0
+            });
+        let Some(w) = inner else {
+            // Only for a flat hull face, which the triangulation never has.
+            unreachable!("no point inside the hull face of {tv:?}");
+        };
+        // The finite tet: `w` in the infinite vertex's place, two vertices swapped to make it
+        // positive; `w` ranks after every vertex (its term vanishes either way).
+        let mut ft = [0, 1, 2, 3].map(|j| if j == k { &w } else { self.p(tv[j]) });
+        let rank = |x: u32| self.rank.get(x as usize).copied().unwrap_or(x);
+        let mut ranks = [0, 1, 2, 3].map(|j| if j == k { u32::MAX } else { rank(tv[j]) });
+        let (a, b) = if k == 0 {
+            (1, 2)
+        } else {
+            (0, if k == 1 { 2 } else { 1 })
+        };
+        ft.swap(a, b);
+        ranks.swap(a, b);
+        in_conflict_bounded(ft, || (ranks, rank(v)), p, f64::INFINITY)
     }
 
     /// The orientation of tet `tv` with its vertex `k` replaced by the real point `p`.
@@ -1054,10 +1148,13 @@ impl Shared<'_> {
 
     /// Whether tet `tv` is in conflict with vertex `v` (its circumsphere strictly contains
     /// `v`, ties broken symbolically), once the static bound of [`insphere_static_lanes`] has
-    /// not decided, from the determinant it computed (rare: ties and tets with a vertex of the
-    /// super-tetrahedron).
+    /// not decided, from the determinant it computed (rare: ties, and the infinite tets,
+    /// whose bound is infinite: [`Shared::infinite_conflict`]).
     #[inline(never)]
     fn conflicts_past_static(&self, tv: [u32; 4], v: u32, det: f64) -> bool {
+        if !self.real(tv) {
+            return self.infinite_conflict(tv, v);
+        }
         // Ties are broken by the input numbering, not the insertion order, so that the
         // result does not depend on how the points are scheduled.
         let rank = |x: u32| self.rank.get(x as usize).copied().unwrap_or(x);
@@ -1250,9 +1347,26 @@ impl Worker {
         } else {
             64 + 4 * sh.tets.len()
         };
-        for _ in 0..max_steps {
+        for step in 0..max_steps {
             let tet = &sh.tets[t as usize];
             let (tv, tn) = (tet.verts(), tet.nbrs());
+            // An infinite tet (rare; with AVX2 it is found where its faces are undecided, off
+            // the common path): entered through its hull face, which sees `p` from behind, it
+            // is in conflict with `p` (strictly beyond the face), the walk's end; at the
+            // start, the walk goes on from the finite tet across that face.
+            macro_rules! infinite_tet {
+                () => {
+                    if step > 0 {
+                        return Some(t);
+                    }
+                    let f = tn[sh.inf_at(tv)];
+                    if f == NONE {
+                        return None;
+                    }
+                    t = f;
+                    continue;
+                };
+            }
             let r = (self.rng.next() & 3) as usize;
             #[cfg(target_arch = "x86_64")]
             if AVX2 {
@@ -1276,6 +1390,10 @@ impl Worker {
                 // by one: 1.8 per insertion on those v*; this way 0.6, and 3% fewer steps.)
                 let pending = undecided & open;
                 if pending != 0 && seen == 0 {
+                    // An infinite tet's bound is infinite: every face undecided.
+                    if !sh.real(tv) {
+                        infinite_tet!();
+                    }
                     for k in 0..4 {
                         if (pending >> k) & 1 == 1 && sh.face_sees(tv, k, p) < 0 {
                             seen |= 1 << k;
@@ -1294,6 +1412,9 @@ impl Worker {
                 prev = t;
                 t = tn[(r + rotated.trailing_zeros() as usize) & 3];
                 continue;
+            }
+            if !sh.real(tv) {
+                infinite_tet!();
             }
             let mut next = NONE;
             for j in 0..4 {
@@ -1331,11 +1452,11 @@ impl Worker {
             if let Some(end) = self.walk::<PAR>(sh, t, &p) {
                 return Ok(end);
             }
-            // Safety net (never expected): scan for a containing tet.
+            // Safety net (never expected): scan for a tet that holds `p`.
             return Ok((0..sh.tets.len() as u32)
                 .find(|&t| {
                     let tet = &sh.tets[t as usize];
-                    tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0)
+                    tet.mark() != DEAD && sh.holds(tet.verts(), &p)
                 })
                 .unwrap_or(t));
         }
@@ -1347,7 +1468,7 @@ impl Worker {
                 return Err(Fail::Busy);
             }
             let tet = &sh.tets[t as usize];
-            if tet.mark() != DEAD && (0..4).all(|k| sh.face_sees(tet.verts(), k, &p) >= 0) {
+            if tet.mark() != DEAD && sh.holds(tet.verts(), &p) {
                 return Ok(t);
             }
             self.unlock_all::<PAR>(sh);
@@ -1632,7 +1753,7 @@ impl Worker {
                     let k = (first + r) & 3;
                     let nb = cn[k as usize];
                     if nb == NONE {
-                        // The hull of the super-tetrahedron: a boundary face.
+                        // Never: every face has a tet across it, infinite tets included.
                         self.boundary.push((c, k, NONE, 0));
                         continue;
                     }
@@ -1755,7 +1876,7 @@ impl Worker {
                 sh.tets[nb as usize].set_nbr(j as usize, id);
             }
             debug_assert!(
-                orient3d(sh.p(tv[0]), sh.p(tv[1]), sh.p(tv[2]), sh.p(tv[3])) > 0,
+                !sh.real(tv) || orient3d(sh.p(tv[0]), sh.p(tv[1]), sh.p(tv[2]), sh.p(tv[3])) > 0,
                 "flat or inverted tet created inserting {v}: {tv:?} cavity {} boundary {}",
                 self.cavity.len(),
                 self.boundary.len()
@@ -1988,7 +2109,8 @@ fn sort_bucket(
 }
 
 struct Builder {
-    /// Real vertices (in insertion order) followed by the 4 super-tetrahedron vertices.
+    /// Real vertices (in insertion order) followed by an entry for the infinite vertex (NaN,
+    /// see [`Builder::new`]).
     pos: Vec<[f64; 3]>,
     /// Input number of each real vertex.
     rank: Vec<u32>,
@@ -2002,9 +2124,12 @@ struct Builder {
 }
 
 impl Builder {
-    /// A builder with the super-tetrahedron (`super_scale` times the input's extent from its
-    /// centre, see [`SUPER_SCALES`]) and room for `capacity` tets (more are added when
-    /// needed).
+    /// A builder with the first tet, on the first four vertices (affinely independent, see
+    /// [`independent_first`]; `spans` says whether they are: otherwise no tet at all), and
+    /// its four infinite tets, one per face: the face and the infinite vertex (numbered
+    /// `pos.len()`, past the real ones), ordered as if that vertex were a point far beyond the
+    /// face, so that the insertion makes and links infinite tets as any others. Room for `capacity` tets (more are added
+    /// when needed).
     ///
     /// With `zeroed`, the arena's `capacity` slots are allocated zeroed (free) at once, as
     /// the parallel phase needs: its workers take slots from one pool and may look at any
@@ -2018,7 +2143,7 @@ impl Builder {
         rank: Vec<u32>,
         capacity: usize,
         zeroed: bool,
-        super_scale: f64,
+        spans: bool,
     ) -> Result<Self> {
         let n_real = pos.len() as u32;
         let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
@@ -2032,49 +2157,59 @@ impl Builder {
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        let c = [
-            0.5 * (lo[0] + hi[0]),
-            0.5 * (lo[1] + hi[1]),
-            0.5 * (lo[2] + hi[2]),
-        ];
-        let r = (0..3)
-            .map(|k| hi[k] - lo[k])
-            .fold(0.0f64, f64::max)
-            .max(1.0);
         let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
         let static_eps = static_insphere_bound(extent);
         let static_orient_eps = static_orient_bound(extent);
-        let s = super_scale * r;
-        pos.push([c[0] - s, c[1] - s, c[2] - s]);
-        pos.push([c[0] + 3.0 * s, c[1] - s, c[2] - s]);
-        pos.push([c[0] - s, c[1] + 3.0 * s, c[2] - s]);
-        pos.push([c[0] - s, c[1] - s, c[2] + 3.0 * s]);
-        let n = n_real;
-        let mut tet = [n, n + 1, n + 2, n + 3];
-        if orient3d(
-            &pos[tet[0] as usize],
-            &pos[tet[1] as usize],
-            &pos[tet[2] as usize],
-            &pos[tet[3] as usize],
-        ) < 0
-        {
-            tet.swap(0, 1);
-        }
+        // The infinite vertex's entry: NaN, so that every floating-point filter of a tet
+        // with it is undecided (their comparisons are false for NaN), which sends the tet to
+        // the tests made for infinite tets; no exact predicate reads it.
+        pos.push([f64::NAN; 3]);
         let no_memory = || Error::InvalidInput(format!("no memory for {capacity} tetrahedra"));
-        let tets: Vec<Tet> = if zeroed {
-            bytemuck::allocation::try_zeroed_vec(capacity.max(1)).map_err(|_| no_memory())?
+        let mut tets: Vec<Tet> = if zeroed {
+            bytemuck::allocation::try_zeroed_vec(capacity.max(5)).map_err(|_| no_memory())?
         } else {
             let mut tets = Vec::new();
-            tets.try_reserve_exact(capacity.max(1))
+            tets.try_reserve_exact(capacity.max(5))
                 .map_err(|_| no_memory())?;
-            tets.push(Tet::dead());
             tets
         };
-        for k in 0..4 {
-            tets[0].v[k].store(tet[k], Relaxed);
-            tets[0].set_nbr(k, NONE);
+        let mut used = 0;
+        if spans {
+            let inf = n_real;
+            let mut first = [0, 1, 2, 3];
+            if orient3d(&pos[0], &pos[1], &pos[2], &pos[3]) < 0 {
+                first.swap(0, 1);
+            }
+            // Slot 0: the first tet; slot 1 + k: the infinite tet on its face k (the face's
+            // first two vertices swapped, so that the far side is the positive one).
+            let mut five = vec![first];
+            for face in APEX_FACE {
+                let f = face.map(|q| first[q]);
+                five.push([f[1], f[0], f[2], inf]);
+            }
+            if !zeroed {
+                tets.resize_with(5, Tet::dead);
+            }
+            for (t, tv) in five.iter().enumerate() {
+                for k in 0..4 {
+                    tets[t].v[k].store(tv[k], Relaxed);
+                    // The tet across face k: the other of the five with the same three
+                    // vertices.
+                    let mut face: Vec<u32> = (0..4).filter(|&q| q != k).map(|q| tv[q]).collect();
+                    face.sort_unstable();
+                    let across = (0..5).find(|&u| {
+                        u != t && {
+                            let mut g: Vec<u32> = five[u].to_vec();
+                            g.sort_unstable();
+                            face.iter().all(|x| g.contains(x))
+                        }
+                    });
+                    tets[t].set_nbr(k, across.map_or(NONE, |u| u as u32));
+                }
+                tets[t].set_mark(NO_STAMP);
+            }
+            used = 5;
         }
-        tets[0].set_mark(NO_STAMP);
         Ok(Self {
             pos,
             rank,
@@ -2082,7 +2217,7 @@ impl Builder {
             static_eps,
             static_orient_eps,
             tets,
-            used: 1,
+            used,
         })
     }
 
@@ -2149,14 +2284,21 @@ impl Builder {
     /// (and taking other workers' chunks once its own are done), then the vertices the
     /// workers backed off from by one thread.
     ///
-    /// Also returns whether the tets fill the convex hull ([`Builder::fills_hull`]).
-    fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> (Delaunay, bool) {
+    /// The first four vertices are in the first tet already ([`Builder::new`]); with no tet
+    /// (the vertices span no volume) nothing is inserted.
+    fn run(mut self, rounds: &[usize], opts: &DelaunayOptions) -> Delaunay {
         let n = self.n_real as usize;
         let mut main = Worker::new(1, 12345);
         main.avx2 = avx2_insertion(opts);
         let threads = opts.threads.clamp(1, 64);
+        if self.used == 0 {
+            return self.finish(DelaunayStats {
+                workers: 1,
+                ..Default::default()
+            });
+        }
         if !in_parallel(threads, n) {
-            self.insert_sequential(&mut main, 0..self.n_real);
+            self.insert_sequential(&mut main, FIRST_TET..self.n_real);
             return self.finish(DelaunayStats {
                 workers: 1,
                 large_cavities: main.large_cavities,
@@ -2178,7 +2320,7 @@ impl Builder {
                 .max()
                 .unwrap_or(0),
         };
-        self.insert_sequential(&mut main, 0..split as u32);
+        self.insert_sequential(&mut main, FIRST_TET..split as u32);
         // Per-round stretches, cut into chunks of consecutive vertices; alternate directions so
         // that neighbouring workers never start a round where the other one ends the previous
         // one. `queues[i]`: the chunks of worker i, in its order of work.
@@ -2354,16 +2496,14 @@ impl Builder {
     /// tets' vertices then get their input numbers ([`Builder::rank`]), bucket by bucket while
     /// it is in the cache (a pass of its own over the output took 1.65 ms at 109k points on
     /// two threads).
-    ///
-    /// Also returns whether the tets fill the convex hull ([`Builder::fills_hull`]).
-    fn finish(self, mut stats: DelaunayStats) -> (Delaunay, bool) {
+    fn finish(self, mut stats: DelaunayStats) -> Delaunay {
         use rayon::prelude::*;
         let start = Instant::now();
         let n = self.n_real;
         let arena = &self.tets[..self.used];
         let rank = &self.rank;
-        // The sort key of each output tet (its largest vertex); NONE for free slots and tets
-        // of the super-tetrahedron. The passes below read this array, not the 36-byte tets.
+        // The sort key of each output tet (its largest vertex); NONE for free slots and
+        // infinite tets. The passes below read this array, not the 36-byte tets.
         let key: Vec<u32> = arena
             .par_iter()
             .map(|tet| {
@@ -2375,17 +2515,6 @@ impl Builder {
                 }
             })
             .collect();
-        if !self.fills_hull(&key) {
-            // Built again with a larger super-tetrahedron: no output needed.
-            stats.times.output = start.elapsed();
-            return (
-                Delaunay {
-                    stats,
-                    ..Default::default()
-                },
-                false,
-            );
-        }
         // Counting sort by key, one vertex range per thread (each scans `key` in
         // order and writes only its own part), then each small bucket by the other vertices.
         let parts = rayon::current_num_threads().clamp(1, 16);
@@ -2475,114 +2604,13 @@ impl Builder {
         // The arena's release (an unmap) is part of the output stage.
         drop(self.tets);
         stats.times.output = start.elapsed();
-        let dt = Delaunay {
+        Delaunay {
             vertices,
             vertex_of_point: Vec::new(),
             tets,
             neighbors,
             stats,
-        };
-        (dt, true)
-    }
-
-    /// Whether the tets of real vertices fill the convex hull of the real vertices (see
-    /// [`SUPER_SCALES`] for when they do not). `key[t]` is [`NONE`] exactly for the free slots
-    /// and the live tets with a vertex of the super-tetrahedron (the shell around the others).
-    ///
-    /// The boundary of the real tets is the faces they share with the shell, each with the
-    /// shell's side as its outside. The real tets fill the hull iff that boundary is closed
-    /// (every directed edge of a face is met once, reversed, by another face), connected and
-    /// convex at every edge (no face's third vertex strictly outside the plane of the face
-    /// across the edge), and passes through every real vertex of the shell (a vertex in no
-    /// real tet is one of those). A closed connected surface convex at every edge bounds a
-    /// convex body (the real tets, which hold every vertex, so the hull); conversely the
-    /// hull's boundary passes all the checks. Costs a look at the shell (about as many tets
-    /// as the hull has faces), not at the whole arena. With no real tet at all, the answer
-    /// is whether the points span no volume.
-    fn fills_hull(&self, key: &[u32]) -> bool {
-        use rayon::prelude::*;
-        let n = self.n_real;
-        let arena = &self.tets[..self.used];
-        let shell: Vec<u32> = key
-            .par_iter()
-            .enumerate()
-            .filter(|&(t, &k)| k == NONE && arena[t].mark() != DEAD)
-            .map(|(t, _)| t as u32)
-            .collect();
-        let mut faces: Vec<[u32; 3]> = Vec::new();
-        let mut touched: Vec<u32> = Vec::new();
-        for &t in &shell {
-            let (tv, tn) = (arena[t as usize].verts(), arena[t as usize].nbrs());
-            touched.extend(tv.iter().copied().filter(|&v| v < n));
-            if tv.iter().filter(|&&v| v >= n).count() == 1 {
-                let k = tv.iter().position(|&v| v >= n).unwrap_or(0);
-                let nb = tn[k];
-                if nb != NONE && key[nb as usize] != NONE {
-                    // `APEX_FACE[k]` order: the shell's vertex `k` is on the positive side.
-                    faces.push(APEX_FACE[k].map(|q| tv[q]));
-                }
-            }
         }
-        if faces.is_empty() {
-            return !self.spans_volume();
-        }
-        // Directed edges (from, to, face), sorted for lookups.
-        let mut edges: Vec<(u32, u32, u32)> = faces
-            .iter()
-            .enumerate()
-            .flat_map(|(i, f)| (0..3).map(move |j| (f[j], f[(j + 1) % 3], i as u32)))
-            .collect();
-        edges.sort_unstable();
-        if edges
-            .windows(2)
-            .any(|w| (w[0].0, w[0].1) == (w[1].0, w[1].1))
-        {
-            return false;
-        }
-        let mut root: Vec<u32> = (0..faces.len() as u32).collect();
-        fn find(root: &mut [u32], mut x: u32) -> u32 {
-            while root[x as usize] != x {
-                root[x as usize] = root[root[x as usize] as usize];
-                x = root[x as usize];
-            }
-            x
-        }
-        let p = |v: u32| &self.pos[v as usize];
-        for &(x, y, i) in &edges {
-            let Ok(e) = edges.binary_search_by(|e| (e.0, e.1).cmp(&(y, x))) else {
-                return false;
-            };
-            let (f, g) = (faces[i as usize], faces[edges[e].2 as usize]);
-            let w = g.iter().copied().find(|&v| v != x && v != y).unwrap_or(x);
-            if orient3d(p(f[0]), p(f[1]), p(f[2]), p(w)) > 0 {
-                return false;
-            }
-            let (a, b) = (find(&mut root, i), find(&mut root, edges[e].2));
-            root[a as usize] = b;
-        }
-        let first = find(&mut root, 0);
-        if (1..faces.len() as u32).any(|i| find(&mut root, i) != first) {
-            return false;
-        }
-        let mut on_boundary: Vec<u32> = faces.iter().flatten().copied().collect();
-        on_boundary.sort_unstable();
-        on_boundary.dedup();
-        touched.iter().all(|v| on_boundary.binary_search(v).is_ok())
-    }
-
-    /// Whether four of the real points are affinely independent (exactly).
-    fn spans_volume(&self) -> bool {
-        let pts = &self.pos[..self.n_real as usize];
-        let Some(a) = pts.first() else {
-            return false;
-        };
-        let Some(b) = pts.iter().find(|&q| q != a) else {
-            return false;
-        };
-        let Some(c) = pts.iter().find(|&q| !collinear(a, b, q)) else {
-            return false;
-        };
-        pts.iter().any(|d| orient3d(a, b, c, d) != 0)
     }
 }
 

@@ -427,9 +427,8 @@ fn weld(dt: &Delaunay, m: usize, vstars: &mut [[f64; 3]], tol: f64) -> usize {
 
 /// The points the mesher triangulates for the v* `vstars`: the v*, then the eight corners of
 /// the protective box (the domain of `opts`, enlarged by one cell, `extent / grid_scale`, on
-/// each side where some v* reaches its boundary). The corners form the convex hull, so no
-/// tet of the v* touches the Delaunay's super-tetrahedron (see [`crate::delaunay`]).
-/// `delaunay_bench` times the Delaunay on these points.
+/// each side where some v* reaches its boundary). The corners form the convex hull, so every
+/// tet of the v* is inside the box. `delaunay_bench` times the Delaunay on these points.
 ///
 /// ```
 /// use ponq_mesh::mesher::{delaunay_points, MeshingOptions};

@@ -963,7 +963,7 @@ enum Fail {
 struct Shared<'a> {
     pos: &'a [[f64; 3]],
     /// Input number of each real vertex (the infinite vertex, numbered past them, is in no
-    /// perturbed test: see [`Worker::infinite_conflict`]).
+    /// perturbed test: see [`Shared::infinite_conflict`]).
     rank: &'a [u32],
     tets: &'a [Tet],
     n_real: u32,

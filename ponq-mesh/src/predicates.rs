@@ -219,7 +219,7 @@ pub fn insphere(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64
 
 /// The static filter of [`insphere_bounded`] for `L` tets against one point `e` at once, one
 /// tet per lane of `[f64; L]` arrays (the compiler computes the lanes together in vector
-/// registers, SSE2 pairs at least), with the local bound of [`reach_decides`] beside it: for
+/// registers, SSE2 pairs at least), with the local bound of `reach_decides` beside it: for
 /// lane `l`, `-sign(det)` when `|det| > eps[l]` or that bound decides, else 0 (undecided:
 /// [`in_conflict_past_static`] goes on from the lane's determinant, the second array). The
 /// lanes compute [`insphere_bounded`]'s determinant by the same function (Rust never fuses a

@@ -291,6 +291,13 @@ fn check_locally_delaunay(dt: &Delaunay) {
     }
 }
 
+/// The v* of the example PoNQ (a CAD part at 64^3, 9,186 points), without the mesher's box.
+fn example_vstars() -> Vec<[f64; 3]> {
+    let example =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/example001_ponq_64.npz");
+    ponq_mesh::io::npz::read_ponq(&example).unwrap().vstars()
+}
+
 #[test]
 fn parallel_insertion_gives_the_same_triangulation() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
@@ -339,12 +346,7 @@ fn parallel_insertion_gives_the_same_triangulation() {
     inputs.push(("snapped", snapped));
     // A CAD part's v* alone (no enclosing box): a convex hull with flat faces, whose points
     // are coplanar and co-circular with many hull faces (the infinite tets' plane rule).
-    let example =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/example001_ponq_64.npz");
-    inputs.push((
-        "CAD v* alone",
-        ponq_mesh::io::npz::read_ponq(&example).unwrap().vstars(),
-    ));
+    inputs.push(("CAD v* alone", example_vstars()));
     for (name, pts) in &inputs {
         let one = Delaunay::with_threads(pts, 1).unwrap();
         let reference = canonical(&one);
@@ -618,12 +620,7 @@ fn tets_fill_the_convex_hull() {
     sets.push(("paraboloid", cap));
     // A CAD part's v* alone: flat hull faces with many coplanar, co-circular points (with a
     // super-tetrahedron 2^30 extents wide, parts like it lost hull tets and were built again).
-    let example =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/example001_ponq_64.npz");
-    sets.push((
-        "CAD v* alone",
-        ponq_mesh::io::npz::read_ponq(&example).unwrap().vstars(),
-    ));
+    sets.push(("CAD v* alone", example_vstars()));
     for (_name, pts) in &sets {
         for threads in [1, 2] {
             let dt = Delaunay::with_threads(pts, threads).unwrap();

@@ -2319,7 +2319,9 @@ impl Builder {
                 .filter(|&r| r <= n / 2)
                 .max()
                 .unwrap_or(0),
-        };
+        }
+        // The first tet's vertices are in already: the workers' stretches start after them.
+        .max(FIRST_TET as usize);
         self.insert_sequential(&mut main, FIRST_TET..split as u32);
         // Per-round stretches, cut into chunks of consecutive vertices; alternate directions so
         // that neighbouring workers never start a round where the other one ends the previous

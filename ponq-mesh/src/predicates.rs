@@ -586,6 +586,17 @@ fn insphere_exact(
             return s;
         }
     }
+    insphere_adaptive(a, b, c, d, e)
+}
+
+/// Shewchuk's adaptive exact insphere (`robust`), the last resort of [`insphere_exact`]. Kept
+/// out of line: its expansion arrays make a stack frame of tens of kilobytes, and inlined
+/// into its caller every call of the caller probed those pages, whether it got this far or not
+/// (on an exact lattice, where nearly every test is a tie the fixed-width path decides, the
+/// insertion measured 5% slower that way: 6.5M extra first-level cache write misses).
+#[cold]
+#[inline(never)]
+fn insphere_adaptive(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3], e: &[f64; 3]) -> i32 {
     // robust::insphere is positive for "inside" when robust::orient3d(a,b,c,d) > 0, which is
     // our negative orientation: flip the sign.
     let v = robust::insphere(c3(a), c3(b), c3(c), c3(d), c3(e));

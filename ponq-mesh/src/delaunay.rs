@@ -45,6 +45,7 @@ use crate::predicates::{
 };
 #[cfg(target_arch = "x86_64")]
 use crate::predicates::{insphere_static4_avx2, orient3d_faces_avx2};
+use crate::vec3;
 
 /// The vertices of the first tet ([`Builder::new`]): the first four of the insertion order
 /// ([`independent_first`]), inserted before any other.
@@ -1060,15 +1061,8 @@ impl Shared<'_> {
         // whichever way is exactly on the inner side (orientation negative with `w` in the
         // infinite vertex's place). Some axis is not parallel to the face, and one of its two
         // ways is inside.
-        let (u, w) = (
-            [f[1][0] - f[0][0], f[1][1] - f[0][1], f[1][2] - f[0][2]],
-            [f[2][0] - f[0][0], f[2][1] - f[0][1], f[2][2] - f[0][2]],
-        );
-        let n = [
-            u[1] * w[2] - u[2] * w[1],
-            u[2] * w[0] - u[0] * w[2],
-            u[0] * w[1] - u[1] * w[0],
-        ];
+        let (u, w) = (vec3::sub(f[1], f[0]), vec3::sub(f[2], f[0]));
+        let n = vec3::cross(u, w);
         let size = (0..3)
             .map(|j| u[j].abs().max(w[j].abs()))
             .fold(0.0f64, f64::max);
@@ -1097,11 +1091,8 @@ impl Shared<'_> {
         let mut ft = [0, 1, 2, 3].map(|j| if j == k { &w } else { self.p(tv[j]) });
         let rank = |x: u32| self.rank.get(x as usize).copied().unwrap_or(x);
         let mut ranks = [0, 1, 2, 3].map(|j| if j == k { u32::MAX } else { rank(tv[j]) });
-        let (a, b) = if k == 0 {
-            (1, 2)
-        } else {
-            (0, if k == 1 { 2 } else { 1 })
-        };
+        // The first two positions other than `k`.
+        let (a, b) = if k <= 1 { (1 - k, 2) } else { (0, 1) };
         ft.swap(a, b);
         ranks.swap(a, b);
         in_conflict_bounded(ft, || (ranks, rank(v)), p, f64::INFINITY)
@@ -2128,8 +2119,8 @@ impl Builder {
     /// [`independent_first`]; `spans` says whether they are: otherwise no tet at all), and
     /// its four infinite tets, one per face: the face and the infinite vertex (numbered
     /// `pos.len()`, past the real ones), ordered as if that vertex were a point far beyond the
-    /// face, so that the insertion makes and links infinite tets as any others. Room for `capacity` tets (more are added
-    /// when needed).
+    /// face, so that the insertion makes and links infinite tets as any others. Room for
+    /// `capacity` tets (more are added when needed).
     ///
     /// With `zeroed`, the arena's `capacity` slots are allocated zeroed (free) at once, as
     /// the parallel phase needs: its workers take slots from one pool and may look at any

@@ -6,6 +6,8 @@
 #
 #   ponq-mesh/benches/authors/reference.sh [OUT_DIR]
 #
+# SEEDS=N (default 5): each output scored with N sampling seeds, the tables give the means
+# (score.py: on some files the seed alone moves EF1 by 0.001).
 # Needs Debian's python3 and release binaries (cargo build --release --bins).
 set -euo pipefail
 cd "$(dirname "$0")/../../.."

@@ -8,6 +8,8 @@
 # MESH: paths under ../shared/data/meshes/cad without .obj (default: the eight of the README),
 # or one of the README's other sets by name: `holdout` (eight other CAD meshes) or `third` (ten
 # more, the set that checked the no-sliver flip rule).
+# SEEDS=N (default 5): each output scored with N sampling seeds, the tables give the means
+# (score.py: on some files the seed alone moves EF1 by 0.001).
 # Needs a checkout of the authors' repository (github.com/nissmar/PoNQ) and Debian's
 # python3-torch, python3-scipy, python3-networkx; release binaries (cargo build --release --bins).
 set -euo pipefail

@@ -6,8 +6,9 @@
 #   AUTHORS_PONQ=/path/to/PoNQ/src/utils ponq-mesh/benches/authors/side_by_side.sh [OUT_DIR] [MESH ...]
 #
 # MESH: paths under ../shared/data/meshes/cad without .obj (default: the eight of the README),
-# or one of the README's other sets by name: `holdout` (eight other CAD meshes) or `third` (ten
-# more, the set that checked the no-sliver flip rule).
+# or one of the README's other sets by name: `holdout` (eight other CAD meshes), `third` (ten
+# more, the set that checked the no-sliver flip rule) or `fourth` (ten more, the set that checked
+# the normal-term flip rule of 2026-12-06).
 # SEEDS=N (default 5): each output scored with N sampling seeds, the tables give the means
 # (score.py: on some files the seed alone moves EF1 by 0.001).
 # Needs a checkout of the authors' repository (github.com/nissmar/PoNQ) and Debian's
@@ -28,6 +29,12 @@ elif [ ${#meshes[@]} -eq 1 ] && [ "${meshes[0]}" = third ]; then
     openscad_examples/Old_example016 openscad_examples/Old_example021 openscad_examples/Basics_CSG
     openscad_examples/Parametric_candleStand freecad_fcstd/fcstd_toolbit_ballend
     freecad_step/freecad_idf_SOT404 gmsh/gmsh_component8 pyvista/pyvista_nut)
+elif [ ${#meshes[@]} -eq 1 ] && [ "${meshes[0]}" = fourth ]; then
+  meshes=(openscad_examples/Old_example012 openscad_examples/Old_example018
+    openscad_examples/Old_example019 openscad_examples/Old_example020
+    openscad_examples/Old_example022 openscad_examples/Basics_linear_extrude
+    freecad_fcstd/fcstd_geomop_5 freecad_fcstd/fcstd_toolbit_chamfer
+    freecad_step/freecad_idf_SOT428_DPAK gmsh/gmsh_t13_data)
 fi
 if [ ${#meshes[@]} -eq 0 ]; then
   meshes=(openscad_examples/Old_example002 openscad_examples/Old_example003

@@ -60,7 +60,7 @@ pub struct FlipStats {
     pub excluded: usize,
 }
 
-/// Relative gain of the whole score a flip must bring.
+/// Relative gain of the normal term a flip must bring.
 const MIN_GAIN: f64 = 1e-9;
 /// A flip must bring the quadric error of the pair below this fraction of what it was: flat
 /// regions (both diagonals fit the planes) are left alone, only diagonals across a crease are

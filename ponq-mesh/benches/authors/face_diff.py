@@ -21,26 +21,31 @@ def cyclic(face):
     i = face.index(min(face))
     return face[i:] + face[:i]
 
-va, fa = read(sys.argv[1])
-vb, fb = read(sys.argv[2])
-cell = lambda p: tuple(round(x * 1e4) for x in p)
-grid = {}
-for j, p in enumerate(vb):
-    grid.setdefault(cell(p), []).append(j)
-match, unmatched = [], 0
-for p in va:
-    c, best = cell(p), None
-    for d in itertools.product((-1, 0, 1), repeat=3):
-        for j in grid.get(tuple(c[k] + d[k] for k in range(3)), []):
-            e = max(abs(p[k] - vb[j][k]) for k in range(3))
-            if e < 1e-6 and (best is None or e < best[0]):
-                best = (e, j)
-    if best is None:
-        unmatched += 1
-        match.append(-1 - len(match))  # a number no vertex of B has
-    else:
-        match.append(best[1])
-a = {cyclic(tuple(match[i] for i in f)) for f in fa}
-b = {cyclic(f) for f in fb}
-print(len(fa), len(fb), unmatched, len(a - b), len(b - a))
-sys.exit(0 if a == b and len(fa) == len(fb) else 1)
+def main():
+    va, fa = read(sys.argv[1])
+    vb, fb = read(sys.argv[2])
+    cell = lambda p: tuple(round(x * 1e4) for x in p)
+    grid = {}
+    for j, p in enumerate(vb):
+        grid.setdefault(cell(p), []).append(j)
+    match, unmatched = [], 0
+    for p in va:
+        c, best = cell(p), None
+        for d in itertools.product((-1, 0, 1), repeat=3):
+            for j in grid.get(tuple(c[k] + d[k] for k in range(3)), []):
+                e = max(abs(p[k] - vb[j][k]) for k in range(3))
+                if e < 1e-6 and (best is None or e < best[0]):
+                    best = (e, j)
+        if best is None:
+            unmatched += 1
+            match.append(-1 - len(match))  # a number no vertex of B has
+        else:
+            match.append(best[1])
+    a = {cyclic(tuple(match[i] for i in f)) for f in fa}
+    b = {cyclic(f) for f in fb}
+    print(len(fa), len(fb), unmatched, len(a - b), len(b - a))
+    sys.exit(0 if a == b and len(fa) == len(fb) else 1)
+
+
+if __name__ == '__main__':
+    main()

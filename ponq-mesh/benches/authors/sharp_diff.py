@@ -22,15 +22,13 @@ import argparse
 import numpy as np
 from scipy.spatial import cKDTree
 
+from face_diff import read
+
 
 def read_obj(path):
-    vertices, faces = [], []
-    with open(path) as f:
-        for line in f:
-            if line.startswith('v '):
-                vertices.append([float(x) for x in line.split()[1:4]])
-            elif line.startswith('f '):
-                faces.append([int(x.split('/')[0]) - 1 for x in line.split()[1:4]])
+    """(vertices (n, 3), faces (m, 3), 0-based) of an OBJ triangle mesh, by face_diff.py's
+    reader."""
+    vertices, faces = read(path)
     if not faces:
         raise SystemExit(f'{path}: no faces')
     return np.array(vertices, dtype=float), np.array(faces, dtype=np.int64)

@@ -417,7 +417,7 @@ struct Distinct {
 /// is within `merge_within` of its first one, so two consecutive ones within twice that. Most
 /// inputs have no such pair, and then the vertices are the points as they are. (One pass
 /// over all the points and a renumbering pass, both on one thread: 3-4 ms of the 109k-point
-/// ordering on two threads, see `docs/meshing-history.md`.)
+/// ordering on two threads, see `docs/meshing.md`.)
 fn distinct_points(points: &[[f64; 3]], merge_within: f64) -> Distinct {
     use rayon::prelude::*;
     let idx = curve_order(points);
@@ -1480,7 +1480,7 @@ impl Worker {
     /// insertion's samples. Here each vertex's first slot is found by stores alone, the
     /// count of first visits is a chain of one-cycle additions, and every other read is
     /// independent: 8% of the samples, the insertion stage 2-5% faster (measured side by
-    /// side, `docs/meshing-history.md`).
+    /// side, `docs/meshing.md`).
     fn link_small(&mut self, sh: &Shared) -> bool {
         const L: usize = SMALL_CAVITY;
         // A triangulated sphere with V vertices has 2V - 4 faces, so at most this many slots
@@ -2790,8 +2790,8 @@ mod tests {
         }
     }
 
-    /// [`distinct_points`] as it was before its runs were found in parallel (2026-12-05,
-    /// fifteenth session): one pass over the sorted points, then one over the input.
+    /// [`distinct_points`] as it was before its runs were found in parallel (changed on
+    /// 2026-12-05): one pass over the sorted points, then one over the input.
     fn distinct_points_reference(points: &[[f64; 3]], merge_within: f64) -> Distinct {
         let idx = curve_order(points);
         let mut group_of_point = vec![0u32; points.len()];

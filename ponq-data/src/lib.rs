@@ -26,6 +26,7 @@ pub mod hdf5;
 pub mod normalize;
 pub mod occupancy;
 pub mod prep;
+pub mod refine;
 pub mod sampling;
 pub mod sdf;
 pub mod synth;

@@ -359,6 +359,22 @@ impl MeshSdf {
         )
     }
 
+    /// The point of the mesh closest to `p` and the unit normal of the triangle it lies on
+    /// (oriented as the triangle's vertices; zero for a degenerate triangle).
+    pub fn closest_point_and_normal(&self, p: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let (_, t) = self.nearest(p, None, &mut [(0, 0.0); STACK]);
+        let f = self.faces[t as usize];
+        let [a, b, c] = f.map(|v| self.verts[v as usize]);
+        let n = cross(sub(b, a), sub(c, a));
+        let len = dot(n, n).sqrt();
+        let n = if len > 0.0 && len.is_finite() {
+            n.map(|x| x / len)
+        } else {
+            [0.0; 3]
+        };
+        (closest_point_on_triangle(p, a, b, c), n)
+    }
+
     /// Generalised winding number at `p` (exact up to rounding; `1` inside and `0` outside a
     /// closed outward-oriented mesh; undefined on the surface).
     pub fn winding_number(&self, p: [f64; 3]) -> f64 {

@@ -7,7 +7,9 @@
 //! - [`tiles`]: the network (`ponq_model::PonqNet`) over the grid in overlapping tiles whose
 //!   margins make the result equal to one pass over the whole grid;
 //! - [`reconstruct`]: prediction -> PoNQ (kept cells, PoNQ-lite / hierarchy) -> `ponq_mesh`
-//!   (Delaunay -> tags -> min cut -> mesh);
+//!   (Delaunay -> tags -> min cut -> mesh) -> refinement against the grid's exact distances
+//!   (`ponq_data::refine`, when the grid is a true signed distance) -> mesh;
+//! - [`mesh_input`]: a mesh as the input (normalised, its exact SDF grid computed);
 //! - [`shipped`]: the model in the repository's `models/` folder, also built into the program.
 //!
 //! The `ponq-infer` program is a thin command line over [`infer`].
@@ -23,10 +25,13 @@
 //! ```
 
 pub mod frame;
+pub mod mesh_input;
 pub mod reconstruct;
 pub mod shipped;
 pub mod tiles;
 
 pub use frame::Frame;
-pub use reconstruct::{InferOptions, InferTimes, Inference, infer};
+pub use reconstruct::{
+    InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, finish, infer, predict,
+};
 pub use tiles::predict_tiled;

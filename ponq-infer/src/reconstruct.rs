@@ -12,6 +12,8 @@ use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{Ponq, TriMesh};
 use ponq_model::{PonqNet, network_input_scale};
 
+use ponq_data::refine::{DistanceCheck, DistanceGrid, RefineOptions, check_distance, refine};
+
 use crate::frame::{Frame, ponq_to_user};
 use crate::tiles::predict_tiled;
 
@@ -48,6 +50,91 @@ pub struct InferOptions {
     pub occupancy_threshold: f32,
     /// Use the authors' cell bases (only for their pretrained weights).
     pub authors_cell_base: bool,
+    /// Refinement against the grid's exact distances ([`RefineMode`]).
+    pub refine: RefineMode,
+    /// Parameters of the refinement.
+    pub refine_options: RefineOptions,
+}
+
+/// When [`finish`] refines the network's PoNQ against the grid's distances
+/// (`ponq_data::refine`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum RefineMode {
+    /// When the grid passes [`check_distance`] (a true signed distance).
+    #[default]
+    Auto,
+    /// Always (on a grid that is not a true distance the result may be worse).
+    On,
+    /// Never.
+    Off,
+}
+
+impl std::str::FromStr for RefineMode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "on" => Ok(Self::On),
+            "off" => Ok(Self::Off),
+            _ => Err(format!("expected auto, on or off, got {s:?}")),
+        }
+    }
+}
+
+impl std::fmt::Display for RefineMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Auto => "auto",
+            Self::On => "on",
+            Self::Off => "off",
+        })
+    }
+}
+
+/// What the refinement did in [`finish`].
+#[derive(Debug, Clone, Default)]
+pub struct RefineReport {
+    /// The mode asked for.
+    pub mode: RefineMode,
+    /// The grid check (in `auto` mode).
+    pub check: Option<DistanceCheck>,
+    /// Whether it ran.
+    pub ran: bool,
+    /// Fit of each round's mesh to the grid's distances (RMS of `dist(x, mesh) - |d(x)|` over
+    /// the band, in cells), the network's mesh first.
+    pub residuals: Vec<f64>,
+    /// Rounds whose mesh was kept (0: the network's mesh).
+    pub rounds_kept: usize,
+    /// Band nodes and dropped samples of the last round.
+    pub samples: (usize, usize),
+    /// Time of the whole refinement (sampling, refits and meshings).
+    pub time: Duration,
+    /// Why it did not run, where that needs saying.
+    pub note: Option<String>,
+}
+
+impl RefineReport {
+    /// One line for a summary.
+    pub fn summary(&self) -> String {
+        if self.ran {
+            let res: Vec<String> = self.residuals.iter().map(|r| format!("{r:.3}")).collect();
+            format!(
+                "refinement ({}): {} round(s) kept, fit to the distances (RMS, cells) {}",
+                self.mode,
+                self.rounds_kept,
+                res.join(" -> ")
+            )
+        } else if let Some(n) = &self.note {
+            format!("refinement ({}): off, {n}", self.mode)
+        } else if let Some(c) = &self.check {
+            format!(
+                "refinement ({}): off, the grid is not a true signed distance ({c})",
+                self.mode
+            )
+        } else {
+            format!("refinement ({}): off", self.mode)
+        }
+    }
 }
 
 impl Default for InferOptions {
@@ -63,6 +150,8 @@ impl Default for InferOptions {
             small_tet_rule: SmallTetRule::InsideOnly,
             occupancy_threshold: 0.5,
             authors_cell_base: false,
+            refine: RefineMode::Auto,
+            refine_options: RefineOptions::default(),
         }
     }
 }
@@ -88,6 +177,8 @@ pub struct InferTimes {
     pub convert: Duration,
     /// Meshing (the stages are in [`Inference::meshing`]).
     pub meshing: Duration,
+    /// Refinement (sampling, refits and their meshings; zero when it did not run).
+    pub refine: Duration,
 }
 
 /// What [`infer`] produced.
@@ -107,17 +198,44 @@ pub struct Inference {
     pub kept_cells: usize,
     /// A note when the result is empty or degenerate.
     pub message: Option<String>,
+    /// What the refinement did.
+    pub refinement: RefineReport,
 }
 
-/// Reconstructs a mesh from an SDF grid (negative inside) with a trained network.
-pub fn infer(
+/// The network's PoNQ on a grid, before any merging: what [`predict`] returns and
+/// [`finish`] meshes. Everything is in the normalised frame of [`Frame`].
+#[derive(Debug, Clone)]
+pub struct Predicted {
+    /// The grid's frame.
+    pub frame: Frame,
+    /// The grid's values in the normalised frame (distances times [`Frame::scale`]).
+    pub normalised: Vec<f64>,
+    /// Every point of the kept cells.
+    pub ponq: Ponq,
+    /// The grid cell of each point.
+    pub cells: Vec<[u32; 3]>,
+    /// Tiles the network ran on.
+    pub tiles: usize,
+    /// Cells kept (occupied and close).
+    pub kept_cells: usize,
+    /// Time of the network.
+    pub network: Duration,
+}
+
+/// Runs the network on an SDF grid (negative inside) and returns its PoNQ over the kept
+/// cells ([`Predicted`]); [`infer`] is this followed by [`finish`].
+///
+/// # Errors
+/// A grid that [`Frame::of`] rejects, an SDF without a sign change ("no sign change"), the
+/// network's errors.
+pub fn predict(
     net: &PonqNet,
     encoder_layers: usize,
     grid: &Grid3,
     opts: &InferOptions,
     device: &Device,
     progress: impl FnMut(usize, usize),
-) -> Result<Inference> {
+) -> Result<Predicted> {
     let frame = Frame::of(grid, opts.bounds)?;
     let (min, max) = grid
         .data
@@ -163,17 +281,58 @@ pub fn infer(
         progress,
     )?;
     let network = t0.elapsed();
-    let t1 = Instant::now();
     let kept = pred.kept_cells(opts.occupancy_threshold, Some(&close))?;
-    let (mut ponq, cells) = pred.to_ponq(&kept)?;
-    let mut grid_scale = frame.n as f64;
-    if opts.lite || opts.coarsen > 0 {
-        ponq = ponq_mesh::lite::coarsen(&ponq, &cells, opts.coarsen)?;
+    let (ponq, cells) = pred.to_ponq(&kept)?;
+    Ok(Predicted {
+        frame,
+        normalised,
+        ponq,
+        cells,
+        tiles,
+        kept_cells: kept.len(),
+        network,
+    })
+}
+
+/// Reconstructs a mesh from an SDF grid (negative inside) with a trained network:
+/// [`predict`], then [`finish`].
+pub fn infer(
+    net: &PonqNet,
+    encoder_layers: usize,
+    grid: &Grid3,
+    opts: &InferOptions,
+    device: &Device,
+    progress: impl FnMut(usize, usize),
+) -> Result<Inference> {
+    let p = predict(net, encoder_layers, grid, opts, device, progress)?;
+    finish(&p, opts)
+}
+
+/// The PoNQ that is meshed: PoNQ-lite / hierarchy / merged smooth cells, per `opts`, and
+/// the grid scale to mesh it with.
+fn convert(ponq: &Ponq, cells: &[[u32; 3]], n: usize, opts: &InferOptions) -> Result<(Ponq, f64)> {
+    let mut grid_scale = n as f64;
+    let out = if opts.lite || opts.coarsen > 0 {
         grid_scale /= f64::from(1u32 << opts.coarsen.min(20));
+        ponq_mesh::lite::coarsen(ponq, cells, opts.coarsen)?
     } else if let Some(angle) = opts.merge_smooth {
-        ponq = ponq_mesh::lite::merge_smooth_cells(&ponq, &cells, angle)?;
-    }
-    let convert = t1.elapsed();
+        ponq_mesh::lite::merge_smooth_cells(ponq, cells, angle)?
+    } else {
+        ponq.clone()
+    };
+    Ok((out, grid_scale))
+}
+
+/// Merges (per `opts`) and meshes the network's PoNQ, refines it against the grid's
+/// distances when `opts.refine` says so, and maps the result to the user's frame.
+///
+/// # Errors
+/// Meshing errors.
+pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
+    let frame = &p.frame;
+    let t1 = Instant::now();
+    let (ponq, grid_scale) = convert(&p.ponq, &p.cells, frame.n, opts)?;
+    let convert_time = t1.elapsed();
     let t2 = Instant::now();
     let mopts = MeshingOptions {
         grid_scale,
@@ -186,7 +345,7 @@ pub fn infer(
         small_tet_rule: opts.small_tet_rule,
         ..Default::default()
     };
-    let (mesh, meshing, message) = if ponq.is_empty() {
+    let (mut mesh, mut meshing, message) = if ponq.is_empty() {
         (
             TriMesh::default(),
             MeshingStats::default(),
@@ -200,6 +359,53 @@ pub fn infer(
         (out.mesh, out.stats, out.message)
     };
     let meshing_time = t2.elapsed();
+    let mut ponq = ponq;
+    // Refinement against the grid's distances.
+    let t3 = Instant::now();
+    let grid = DistanceGrid::new(
+        frame.cells.map(|c| c + 1),
+        [-1.0; 3],
+        2.0 / frame.n as f64,
+        &p.normalised,
+    )?;
+    let mut refinement = RefineReport {
+        mode: opts.refine,
+        ..Default::default()
+    };
+    let wanted = match opts.refine {
+        RefineMode::Off => false,
+        RefineMode::On => true,
+        RefineMode::Auto => {
+            let c = check_distance(&grid);
+            refinement.check = Some(c);
+            c.is_distance()
+        }
+    };
+    if wanted && !mesh.faces.is_empty() && opts.open.is_none() {
+        // Every round's merged PoNQ and meshing statistics, to report the kept one's.
+        let mut rounds: Vec<(Ponq, MeshingStats)> = Vec::new();
+        let r = refine(&p.ponq, &mesh, &grid, &opts.refine_options, |raw| {
+            let (q, _) = convert(raw, &p.cells, frame.n, opts)
+                .map_err(|e| ponq_data::DataError::Invalid(format!("{e:#}")))?;
+            let out = mesh_ponq(&q, &mopts)?;
+            rounds.push((q, out.stats));
+            Ok(out.mesh)
+        })
+        .context("refining the PoNQ against the grid's distances")?;
+        refinement.ran = true;
+        refinement.residuals = r.residuals;
+        refinement.rounds_kept = r.rounds_kept;
+        refinement.samples = r.samples;
+        if r.rounds_kept > 0 && r.rounds_kept <= rounds.len() {
+            let (q, st) = rounds.swap_remove(r.rounds_kept - 1);
+            ponq = q;
+            meshing = st;
+            mesh = r.mesh;
+        }
+        refinement.time = t3.elapsed();
+    } else if wanted && opts.open.is_some() {
+        refinement.note = Some("refinement is for closed surfaces: not run with --open".into());
+    }
     let mesh = if frame.is_identity() {
         mesh
     } else {
@@ -210,15 +416,17 @@ pub fn infer(
     };
     Ok(Inference {
         mesh,
-        ponq: ponq_to_user(&ponq, &frame)?,
+        ponq: ponq_to_user(&ponq, frame)?,
         meshing,
         times: InferTimes {
-            network,
-            convert,
+            network: p.network,
+            convert: convert_time,
             meshing: meshing_time,
+            refine: refinement.time,
         },
-        tiles,
-        kept_cells: kept.len(),
+        tiles: p.tiles,
+        kept_cells: p.kept_cells,
         message,
+        refinement,
     })
 }

@@ -1,21 +1,23 @@
-//! `ponq-infer`: an SDF grid (`.npy`) in, a sharp watertight mesh out, with the trained
-//! PoNQ network.
+//! `ponq-infer`: an SDF grid (`.npy`) or a mesh in, a sharp watertight mesh out, with the
+//! trained PoNQ network.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
-use ponq_infer::{InferOptions, infer, shipped};
+use ponq_infer::mesh_input::mesh_grid;
+use ponq_infer::{InferOptions, RefineMode, finish, predict, shipped};
 use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{io, validity};
 use ponq_model::backend::{BackendKind, device};
 
-/// Reconstruct a mesh from a signed distance grid (negative inside) with the PoNQ network:
-/// SDF grid -> network -> PoNQ -> Delaunay -> tags -> min cut -> mesh.
+/// Reconstruct a mesh from a signed distance grid (negative inside) or from a mesh with the
+/// PoNQ network: SDF grid -> network -> PoNQ -> [refinement] -> Delaunay -> tags -> min cut
+/// -> mesh.
 ///
 /// The output is closed, oriented, manifold and free of self-intersections (checked; exit
 /// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 empty
@@ -23,12 +25,32 @@ use ponq_model::backend::{BackendKind, device};
 #[derive(Parser, Debug)]
 #[command(version, about, long_about)]
 struct Args {
-    /// SDF grid: a `.npy` array of rank 3, float32 or float64, C or Fortran order. Values are
-    /// signed distances in the units of --bounds, negative inside; cells must be cubes.
-    sdf: PathBuf,
+    /// Input: an SDF grid (`.npy` array of rank 3, float32 or float64, C or Fortran order;
+    /// signed distances in the units of --bounds, negative inside; cells must be cubes), or a
+    /// closed triangle mesh (`.obj`, `.ply`, `.off`, `.stl`), which is normalised into
+    /// [-1,1]^3 and sampled on a grid of --res cells per side with exact signed distances
+    /// (as `ponq-prep sdf` does); the output is then in the mesh's coordinates.
+    input: PathBuf,
     /// Output mesh (`.obj`, `.ply` or `.off`).
     #[arg(short, long)]
     output: PathBuf,
+    /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
+    /// (the network's training resolution), 64 a good default, 128 fine.
+    #[arg(long, value_name = "RES")]
+    res: Option<usize>,
+    /// Mesh input only: write the output in the normalised [-1,1] frame of the grid (as
+    /// `ponq-prep sdf` + `ponq-infer` on its grid would) instead of the input's coordinates.
+    #[arg(long)]
+    normalized: bool,
+    /// Refine the network's PoNQ against the grid's exact distances (each node near the
+    /// surface gives a surface sample along the first mesh's directions; the quadrics are
+    /// refitted to them and the PoNQ meshed again, a few rounds, a round kept only if its
+    /// mesh fits the distances better). `auto` refines when the grid passes a check of a true
+    /// signed distance (gradient of length 1, 1-Lipschitz near the surface), so that scaled,
+    /// smoothed or approximate fields are left as the network reads them; `on` always; `off`
+    /// never. Not with --open, --lite or --coarsen.
+    #[arg(long, value_name = "MODE", default_value = "auto")]
+    refine: RefineMode,
     /// PoNQ-lite: one point per cell (quadrics of the cell summed).
     #[arg(long)]
     lite: bool,
@@ -101,9 +123,39 @@ struct Args {
     /// Skip the validity check of the output.
     #[arg(long)]
     no_check: bool,
-    /// Print nothing but errors.
+    /// Print nothing but errors (no progress bars, no summary).
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// A spinner for a stage without steps of its own (hidden with --quiet or off a terminal).
+fn spinner(quiet: bool, msg: &'static str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    pb.set_message(msg);
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+fn bar(quiet: bool, template: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(1);
+    pb.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    pb
+}
+
+fn is_mesh_path(p: &Path) -> bool {
+    ponq_mesh::io::MeshFormat::from_path(p).is_some()
 }
 
 enum Outcome {
@@ -146,10 +198,44 @@ fn run(args: &Args) -> Result<Outcome> {
         None => ([-1.0; 3], [1.0; 3]),
         Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
     };
+    let mesh_input = is_mesh_path(&args.input);
+    if mesh_input && args.bounds.is_some() {
+        bail!("--bounds is for SDF grids: a mesh input is normalised into [-1,1]^3");
+    }
+    if !mesh_input && (args.res.is_some() || args.normalized) {
+        bail!("--res and --normalized are for a mesh input (.obj, .ply, .off, .stl)");
+    }
+    if !args.input.exists() {
+        bail!("the input {} does not exist", args.input.display());
+    }
     let dev = device(args.backend).map_err(anyhow::Error::msg)?;
     let t = Instant::now();
-    let grid = io::npy::read_npy_grid(&args.sdf)
-        .with_context(|| format!("cannot read the SDF grid {}", args.sdf.display()))?;
+    let (grid, normalization) = if mesh_input {
+        let mesh = io::read_mesh(&args.input)
+            .with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
+        let res = args.res.unwrap_or(64);
+        let pb = bar(
+            args.quiet,
+            "sdf {bar:30} {percent:>3}% of {len} nodes [{elapsed} < {eta}]",
+        );
+        pb.set_length(((res + 1) as u64).pow(3));
+        let g = mesh_grid(&mesh, res, args.open.is_some(), |n| {
+            pb.set_position(n as u64)
+        })
+        .with_context(|| format!("the input mesh {}", args.input.display()))?;
+        pb.finish_and_clear();
+        if g.open && !args.quiet {
+            eprintln!(
+                "note: the input mesh is open; the grid's sign follows its generalised winding \
+                 number (--open culls the triangles away from the surface)"
+            );
+        }
+        (g.grid, Some(g.normalization))
+    } else {
+        let g = io::npy::read_npy_grid(&args.input)
+            .with_context(|| format!("cannot read the SDF grid {}", args.input.display()))?;
+        (g, None)
+    };
     let read_time = t.elapsed();
     let (net, net_cfg, authors) = match (&args.model, &args.authors_weights) {
         (_, Some(pt)) => {
@@ -184,19 +270,18 @@ fn run(args: &Args) -> Result<Outcome> {
         } else {
             args.small_tets
         },
+        refine: if args.lite || args.coarsen > 0 {
+            RefineMode::Off
+        } else {
+            args.refine
+        },
         ..Default::default()
     };
-    let pb = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        let pb = ProgressBar::new(1);
-        pb.set_style(
-            ProgressStyle::with_template("network {bar:30} {pos}/{len} tiles [{elapsed}]")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        pb
-    };
-    let res = match infer(
+    if (args.lite || args.coarsen > 0) && args.refine == RefineMode::On {
+        bail!("--refine on works on the full PoNQ: not with --lite or --coarsen");
+    }
+    let pb = bar(args.quiet, "network {bar:30} {pos}/{len} tiles [{elapsed}]");
+    let predicted = match predict(
         &net,
         net_cfg.encoder_layers,
         &grid,
@@ -216,6 +301,22 @@ fn run(args: &Args) -> Result<Outcome> {
         Err(e) => return Err(e),
     };
     pb.finish_and_clear();
+    let sp = spinner(
+        args.quiet,
+        if opts.refine == RefineMode::Off {
+            "meshing"
+        } else {
+            "meshing and refining"
+        },
+    );
+    let res = finish(&predicted, &opts);
+    sp.finish_and_clear();
+    let mut res = res?;
+    if let Some(norm) = &normalization
+        && !args.normalized
+    {
+        res.mesh = norm.invert_mesh(&res.mesh);
+    }
     let t = Instant::now();
     io::write_mesh(&args.output, &res.mesh).context("writing the mesh")?;
     if let Some(p) = &args.save_ponq {
@@ -226,6 +327,19 @@ fn run(args: &Args) -> Result<Outcome> {
     if !args.quiet {
         let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
         let s = &res.meshing;
+        if let Some(n) = &normalization {
+            println!(
+                "{}: normalised by centre {:?}, scale {:.6e}; output in {} coordinates",
+                args.input.display(),
+                n.centre,
+                n.scale,
+                if args.normalized {
+                    "the grid's [-1,1]"
+                } else {
+                    "the input's"
+                }
+            );
+        }
         println!(
             "{}: grid {:?} -> {} cells kept, {} points -> {} V, {} F",
             args.output.display(),
@@ -245,8 +359,12 @@ fn run(args: &Args) -> Result<Outcome> {
                 if s.meshed_twice { ", meshed twice" } else { "" }
             );
         }
+        if opts.refine != RefineMode::Off {
+            println!("{}", res.refinement.summary());
+        }
         println!(
-            "time (ms): read {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}), write {:.1}",
+            "time (ms): {} {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}), refinement {:.1}, write {:.1}",
+            if normalization.is_some() { "read + sdf" } else { "read" },
             ms(read_time),
             ms(res.times.network),
             res.tiles,
@@ -258,6 +376,7 @@ fn run(args: &Args) -> Result<Outcome> {
             ms(s.times.manifold),
             ms(s.times.extraction),
             ms(s.times.flips),
+            ms(res.times.refine),
             ms(write_time)
         );
         if let Some(r) = &report {

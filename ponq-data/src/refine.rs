@@ -1,0 +1,575 @@
+//! Refinement of a PoNQ against the exact distances of its input grid.
+//!
+//! A grid of exact signed distances says, at every node `x`, that the surface touches the
+//! sphere of radius `|d(x)|` around `x` and enters none of the nodes' open balls. Once a
+//! first mesh gives each node a direction `u` towards its nearest surface point,
+//! `s = x + |d(x)| u` is a point of the true surface up to second order in the direction's
+//! error, with the normal `-sign(d(x)) u`. Nodes in the normal cone of a convex edge (from
+//! inside: a concave one) all land on that edge, so sharp edges and corners get dense,
+//! accurate samples that a coarse grid otherwise hides.
+//!
+//! The stages, each a function:
+//! - [`check_distance`]: is the grid a true distance (1-Lipschitz, falling at rate one
+//!   towards the surface)? Refinement is only meaningful on one.
+//! - [`grid_samples`]: one sample per node of the band `|d| < band` cells, its direction
+//!   from the closest point of a mesh; samples that enter a neighbour's ball are pushed out
+//!   along their sphere, and dropped when they cannot be (a node whose sphere touches two
+//!   sides of a thin part, a direction from a wrong mesh).
+//! - [`refit`]: each PoNQ point gets the mean plane quadric of the samples in its Voronoi
+//!   cell (within `radius` cells), scaled to the network's quadric's trace, and its v* again.
+//! - [`refine`]: mesh -> samples -> refit -> mesh, a few times, keeping a new mesh only while
+//!   it fits the grid's distances better (RMS of `dist(x, mesh) - |d(x)|` over the band).
+//!
+//! ```
+//! use ponq_data::refine::{DistanceGrid, check_distance};
+//! // The exact distance to the plane z = 0.1 on a 9^3 grid over [-1,1]^3.
+//! let h = 0.25;
+//! let values: Vec<f64> = (0..729).map(|i| -1.0 + h * (i % 9) as f64 - 0.1).collect();
+//! let grid = DistanceGrid::new([9; 3], [-1.0; 3], h, &values).unwrap();
+//! assert!(check_distance(&grid).is_distance());
+//! ```
+
+use std::time::{Duration, Instant};
+
+use ponq_mesh::nn::PointIndex;
+use ponq_mesh::{Ponq, Quadric, TriMesh};
+use rayon::prelude::*;
+
+use crate::error::{DataError, Result};
+use crate::sdf::MeshSdf;
+
+/// A grid of signed distances, negative inside: node `(i, j, k)` at `lo + h (i, j, k)`,
+/// values in C order (`k` fastest).
+///
+/// Invariants (checked by [`DistanceGrid::new`]): `values.len()` is the product of `dims`,
+/// every dimension is at least 2, `h` is positive and finite.
+#[derive(Debug, Clone, Copy)]
+pub struct DistanceGrid<'a> {
+    /// Nodes per axis.
+    pub dims: [usize; 3],
+    /// Position of node `(0, 0, 0)`.
+    pub lo: [f64; 3],
+    /// Node spacing (the same along every axis).
+    pub h: f64,
+    /// Signed distances.
+    pub values: &'a [f64],
+}
+
+impl<'a> DistanceGrid<'a> {
+    /// Checks and wraps a grid.
+    ///
+    /// # Errors
+    /// [`DataError::Invalid`] for a size mismatch, fewer than 2 nodes along an axis, a
+    /// spacing that is not positive and finite, or a non-finite value.
+    pub fn new(dims: [usize; 3], lo: [f64; 3], h: f64, values: &'a [f64]) -> Result<Self> {
+        if dims.iter().any(|&d| d < 2) {
+            return Err(DataError::Invalid(format!(
+                "a distance grid needs at least 2 nodes per axis, got {dims:?}"
+            )));
+        }
+        if values.len() != dims.iter().product::<usize>() {
+            return Err(DataError::Invalid(format!(
+                "{} values for a grid of {dims:?} nodes",
+                values.len()
+            )));
+        }
+        if !(h > 0.0 && h.is_finite()) || lo.iter().any(|x| !x.is_finite()) {
+            return Err(DataError::Invalid(format!(
+                "invalid grid frame: origin {lo:?}, spacing {h}"
+            )));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(DataError::Invalid(format!(
+                "the grid holds a non-finite value at flat index {i}"
+            )));
+        }
+        Ok(Self {
+            dims,
+            lo,
+            h,
+            values,
+        })
+    }
+
+    #[inline]
+    fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        (i * self.dims[1] + j) * self.dims[2] + k
+    }
+
+    #[inline]
+    fn node(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
+        [
+            self.lo[0] + self.h * i as f64,
+            self.lo[1] + self.h * j as f64,
+            self.lo[2] + self.h * k as f64,
+        ]
+    }
+
+    #[inline]
+    fn coords(&self, flat: usize) -> [usize; 3] {
+        let k = flat % self.dims[2];
+        let ij = flat / self.dims[2];
+        [ij / self.dims[1], ij % self.dims[1], k]
+    }
+}
+
+/// Options of [`grid_samples`], [`refit`] and [`refine`]. Lengths are in grid cells.
+#[derive(Debug, Clone)]
+pub struct RefineOptions {
+    /// Nodes with `|d| < band` give a sample.
+    pub band: f64,
+    /// A sample goes to its nearest PoNQ point if that is within `radius`.
+    pub radius: f64,
+    /// Samples farther than this from the mesh that gave their direction are dropped.
+    pub max_shift: f64,
+    /// A sample that still enters a neighbour node's ball this deep after being pushed out
+    /// is dropped.
+    pub ball_tolerance: f64,
+    /// Weight of the network's own quadric in the refitted one (0: the samples' alone).
+    pub prior: f64,
+    /// Also replace each point's normal by its samples' mean normal (its length kept).
+    pub normals: bool,
+    /// Points need this many samples to be refitted (the others keep the network's values).
+    pub min_samples: usize,
+    /// Rounds of mesh -> samples -> refit -> mesh.
+    pub iterations: usize,
+    /// Solve the refitted v* around the network's v* (true) or around its point (false).
+    pub around_vstar: bool,
+}
+
+impl Default for RefineOptions {
+    fn default() -> Self {
+        Self {
+            band: 1.75,
+            radius: 1.0,
+            max_shift: 1.0,
+            ball_tolerance: 0.05,
+            prior: 0.0,
+            normals: false,
+            min_samples: 1,
+            iterations: 2,
+            around_vstar: false,
+        }
+    }
+}
+
+/// What [`check_distance`] measured on the nodes near the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DistanceCheck {
+    /// Nodes with `0.3 < |d| < 2` cells (and two nodes from the grid's sides) that were
+    /// tested.
+    pub band_nodes: usize,
+    /// Median over them of the steepest descent rate of `|d|` towards the surface: the
+    /// largest `sign(d(x)) (d(x) - d(y)) / |x - y|` over the nodes `y` of the 5x5x5 block
+    /// around `x`. A true distance gives nearly 1 (exactly 1 along the gradient; the block's
+    /// directions miss it by at most a few degrees).
+    pub steepest_median: f64,
+    /// Fraction of them with a steepest rate above 0.9.
+    pub steepest_unit_fraction: f64,
+    /// Nodes with a rate above 1 (+0.1%): the field changes faster than a distance can.
+    pub steeper_than_one: usize,
+}
+
+impl DistanceCheck {
+    /// Whether the grid looks like a true signed distance near its surface: at most 1% of
+    /// the tested nodes steeper than 1, a median steepest rate of at least 0.91 and at least
+    /// 55% of the nodes above 0.9. Scaled, smoothed or noisy fields fail (measured on grids
+    /// made so from exact ones: `docs/refinement.md`); a truncated one passes (its band is
+    /// exact).
+    pub fn is_distance(&self) -> bool {
+        self.band_nodes > 0
+            && self.steeper_than_one as f64 <= 0.01 * self.band_nodes as f64
+            && self.steepest_median >= 0.91
+            && self.steepest_unit_fraction >= 0.55
+    }
+}
+
+impl std::fmt::Display for DistanceCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} nodes near the surface: steepest rate median {:.3}, {:.1}% above 0.9, {:.1}% above 1",
+            self.band_nodes,
+            self.steepest_median,
+            100.0 * self.steepest_unit_fraction,
+            100.0 * self.steeper_than_one as f64 / self.band_nodes.max(1) as f64
+        )
+    }
+}
+
+/// Tests whether a grid holds a true signed distance near its zero level set (see
+/// [`DistanceCheck`]): a distance is 1-Lipschitz, and from every node off the medial axis
+/// it falls towards the surface at rate 1.
+pub fn check_distance(grid: &DistanceGrid) -> DistanceCheck {
+    let h = grid.h;
+    let [n0, n1, n2] = grid.dims;
+    const R: usize = 2;
+    let offsets: Vec<([isize; 3], f64)> = (-2isize..=2)
+        .flat_map(|a| (-2isize..=2).flat_map(move |b| (-2isize..=2).map(move |c| [a, b, c])))
+        .filter(|o| *o != [0, 0, 0])
+        .map(|o| {
+            let l = ((o[0] * o[0] + o[1] * o[1] + o[2] * o[2]) as f64).sqrt();
+            (o, 1.0 / (l * h))
+        })
+        .collect();
+    let rates: Vec<f64> = (R..n0.saturating_sub(R))
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let offsets = &offsets;
+            (R..n1.saturating_sub(R)).flat_map(move |j| {
+                (R..n2.saturating_sub(R)).filter_map(move |k| {
+                    let v = grid.values[grid.index(i, j, k)];
+                    if !(v.abs() > 0.3 * h && v.abs() < 2.0 * h) {
+                        return None;
+                    }
+                    let sign = v.signum();
+                    let mut best = f64::NEG_INFINITY;
+                    for &(o, inv) in offsets {
+                        let y = grid.values[grid.index(
+                            (i as isize + o[0]) as usize,
+                            (j as isize + o[1]) as usize,
+                            (k as isize + o[2]) as usize,
+                        )];
+                        best = best.max(sign * (v - y) * inv);
+                    }
+                    Some(best)
+                })
+            })
+        })
+        .collect();
+    let n = rates.len();
+    let steeper = rates.iter().filter(|&&r| r > 1.0 + 1e-3).count();
+    let unit = rates.iter().filter(|&&r| r > 0.9).count();
+    let mut rates = rates;
+    let median = if n == 0 {
+        f64::NAN
+    } else {
+        *rates.select_nth_unstable_by(n / 2, f64::total_cmp).1
+    };
+    DistanceCheck {
+        band_nodes: n,
+        steepest_median: median,
+        steepest_unit_fraction: if n == 0 { 0.0 } else { unit as f64 / n as f64 },
+        steeper_than_one: steeper,
+    }
+}
+
+/// Surface samples read off a distance grid along the directions of a mesh.
+#[derive(Debug, Clone, Default)]
+pub struct GridSamples {
+    /// Sample positions (on the true surface up to the directions' error).
+    pub points: Vec<[f64; 3]>,
+    /// Unit outward normals.
+    pub normals: Vec<[f64; 3]>,
+    /// Nodes of the band.
+    pub band_nodes: usize,
+    /// Band nodes whose sample was dropped.
+    pub dropped: usize,
+    /// RMS over the band nodes of `dist(x, mesh) - |d(x)|`, in cells: how well the mesh fits
+    /// the grid's distances.
+    pub residual: f64,
+}
+
+/// Offsets of the neighbour nodes whose balls a sample is tested against.
+const REACH: isize = 3;
+
+/// One sample per band node (`|d| < band` cells): `s = x + |d| u` with `u` the direction
+/// from `x` to its closest point on `mesh`, pushed out of the neighbour nodes' balls along
+/// the sphere of `x`; dropped when it still enters one by more than `ball_tolerance` or is
+/// farther than `max_shift` from the mesh. Also measures how well `mesh` fits the distances.
+///
+/// # Errors
+/// [`DataError::Invalid`] for a mesh without faces or with non-finite vertices.
+pub fn grid_samples(
+    grid: &DistanceGrid,
+    mesh: &TriMesh,
+    opts: &RefineOptions,
+) -> Result<GridSamples> {
+    let sdf = MeshSdf::new(mesh)?;
+    let h = grid.h;
+    let band = opts.band * h;
+    let nodes: Vec<usize> = (0..grid.values.len())
+        .filter(|&f| grid.values[f].abs() < band)
+        .collect();
+    let tol = opts.ball_tolerance * h;
+    let max_shift = opts.max_shift * h;
+    type Out = (Option<([f64; 3], [f64; 3])>, f64);
+    let out: Vec<Out> = nodes
+        .par_iter()
+        .map(|&f| {
+            let [i, j, k] = grid.coords(f);
+            let x = grid.node(i, j, k);
+            let d = grid.values[f];
+            let r = d.abs();
+            let (y, nf) = sdf.closest_point_and_normal(x);
+            let yx = sub(y, x);
+            let dist = norm(yx);
+            let res = (dist - r) / h;
+            let sign = if d < 0.0 { -1.0 } else { 1.0 };
+            let u = if dist > 1e-12 * h {
+                yx.map(|c| c / dist)
+            } else if norm(nf) > 0.0 {
+                nf.map(|c| -sign * c)
+            } else {
+                return (None, res);
+            };
+            let mut s = add(x, u.map(|c| c * r));
+            if r > 0.0 {
+                // Push the sample out of the neighbours' balls, back onto x's sphere.
+                for _ in 0..4 {
+                    let (worst, pen) = deepest_ball(grid, [i, j, k], s);
+                    if pen <= 1e-3 * h {
+                        break;
+                    }
+                    let (c, rc) = worst;
+                    let cs = sub(s, c);
+                    let l = norm(cs);
+                    if l == 0.0 {
+                        break;
+                    }
+                    let pushed = add(c, cs.map(|v| v * rc / l));
+                    let xs = sub(pushed, x);
+                    let lx = norm(xs);
+                    if lx == 0.0 {
+                        break;
+                    }
+                    s = add(x, xs.map(|v| v * r / lx));
+                }
+                if deepest_ball(grid, [i, j, k], s).1 > tol {
+                    return (None, res);
+                }
+            }
+            if norm(sub(s, y)) > max_shift {
+                return (None, res);
+            }
+            let n = if r > 0.0 {
+                sub(s, x).map(|c| -sign * c / r)
+            } else {
+                nf
+            };
+            (Some((s, n)), res)
+        })
+        .collect();
+    let mut g = GridSamples {
+        band_nodes: nodes.len(),
+        ..Default::default()
+    };
+    let mut sq = 0.0;
+    for (s, res) in out {
+        sq += res * res;
+        match s {
+            Some((p, n)) => {
+                g.points.push(p);
+                g.normals.push(n);
+            }
+            None => g.dropped += 1,
+        }
+    }
+    g.residual = if nodes.is_empty() {
+        0.0
+    } else {
+        (sq / nodes.len() as f64).sqrt()
+    };
+    Ok(g)
+}
+
+/// The neighbour node (centre, radius) whose open ball `s` enters deepest, and how deep.
+fn deepest_ball(grid: &DistanceGrid, at: [usize; 3], s: [f64; 3]) -> (([f64; 3], f64), f64) {
+    let mut best = (([0.0; 3], 0.0), 0.0);
+    let range = |a: usize| {
+        let lo = at[a].saturating_sub(REACH as usize);
+        let hi = (at[a] + REACH as usize).min(grid.dims[a] - 1);
+        lo..=hi
+    };
+    for i in range(0) {
+        for j in range(1) {
+            for k in range(2) {
+                if [i, j, k] == at {
+                    continue;
+                }
+                let r = grid.values[grid.index(i, j, k)].abs();
+                let c = grid.node(i, j, k);
+                let pen = r - norm(sub(s, c));
+                if pen > best.1 {
+                    best = ((c, r), pen);
+                }
+            }
+        }
+    }
+    best
+}
+
+/// What [`refit`] changed.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RefitStats {
+    /// Points whose quadric was refitted.
+    pub refitted: usize,
+    /// Samples assigned to a point.
+    pub assigned: usize,
+}
+
+/// Refits a PoNQ to grid samples: each sample goes to its nearest point (by v*) within
+/// `radius` cells; a point with at least `min_samples` samples gets the mean of their plane
+/// quadrics, scaled to the trace of its own quadric's `A` (and mixed with it by `prior`), and
+/// its v* solved again; the others are unchanged. Points, and normals unless
+/// `opts.normals`, are kept.
+///
+/// # Errors
+/// [`DataError::Invalid`] for a non-positive `h`; errors of [`Ponq::new`].
+pub fn refit(
+    ponq: &Ponq,
+    samples: &GridSamples,
+    h: f64,
+    opts: &RefineOptions,
+) -> Result<(Ponq, RefitStats)> {
+    if !(h > 0.0 && h.is_finite()) {
+        return Err(DataError::Invalid(format!("invalid cell size {h}")));
+    }
+    let vstars = ponq.vstars();
+    let mut stats = RefitStats::default();
+    let Some(index) = PointIndex::new(&vstars) else {
+        return Ok((ponq.clone(), stats));
+    };
+    let r2 = (opts.radius * h).powi(2);
+    let nearest = index.nearest_many(&samples.points);
+    let m = ponq.len();
+    let mut quad = vec![Quadric::zero(); m];
+    let mut nsum = vec![[0.0f64; 3]; m];
+    let mut count = vec![0usize; m];
+    for (s, &(i, d2)) in nearest.iter().enumerate() {
+        if d2 > r2 {
+            continue;
+        }
+        let i = i as usize;
+        quad[i] += Quadric::from_plane(samples.points[s], samples.normals[s]);
+        for a in 0..3 {
+            nsum[i][a] += samples.normals[s][a];
+        }
+        count[i] += 1;
+        stats.assigned += 1;
+    }
+    let mut quadrics = ponq.quadrics.clone();
+    let mut normals = ponq.normals.clone();
+    let mut new_vstars = vstars.clone();
+    for i in 0..m {
+        if count[i] < opts.min_samples.max(1) {
+            continue;
+        }
+        let qs = quad[i] * (1.0 / count[i] as f64);
+        let net = ponq.quadrics[i];
+        let (tn, ts) = (net.a.trace(), qs.a.trace());
+        if !(ts > 0.0) {
+            continue;
+        }
+        let scale = if tn > 0.0 { tn / ts } else { 1.0 };
+        let q = qs * (scale * (1.0 - opts.prior)) + net * opts.prior;
+        let reference = if opts.around_vstar {
+            vstars[i]
+        } else {
+            ponq.points[i]
+        };
+        let v = q.optimal_point(reference, ponq_mesh::quadric::SVD_CUTOFF);
+        if v.iter().any(|c| !c.is_finite()) {
+            continue;
+        }
+        quadrics[i] = q;
+        new_vstars[i] = v;
+        if opts.normals {
+            let l = norm(nsum[i]);
+            let keep = norm(ponq.normals[i]);
+            if l > 0.0 && keep > 0.0 {
+                normals[i] = nsum[i].map(|c| c / l * keep);
+            }
+        }
+        stats.refitted += 1;
+    }
+    let out = Ponq::new(ponq.points.clone(), normals, quadrics, Some(new_vstars))?;
+    Ok((out, stats))
+}
+
+/// What [`refine`] did.
+#[derive(Debug, Clone, Default)]
+pub struct Refinement {
+    /// The mesh kept (the input mesh when no round improved the fit).
+    pub mesh: TriMesh,
+    /// The refitted PoNQ that gave it (`None` when the input mesh was kept).
+    pub ponq: Option<Ponq>,
+    /// Fit of each mesh to the distances (see [`GridSamples::residual`]): the input's first.
+    pub residuals: Vec<f64>,
+    /// Rounds whose mesh was kept (0: the input).
+    pub rounds_kept: usize,
+    /// Samples of the last round (band nodes, dropped).
+    pub samples: (usize, usize),
+    /// Time spent sampling and refitting (meshing excluded).
+    pub time: Duration,
+}
+
+/// Refines a PoNQ against a distance grid: starting from `mesh` (the mesh of `ponq`),
+/// `opts.iterations` times take samples along the current mesh's directions, refit `ponq`
+/// (always the original, so errors do not compound) and mesh it with `mesh_fn`; a round's
+/// mesh is kept only if it fits the distances better than the best so far.
+///
+/// # Errors
+/// Errors of [`grid_samples`], [`refit`] and `mesh_fn`.
+pub fn refine(
+    ponq: &Ponq,
+    mesh: &TriMesh,
+    grid: &DistanceGrid,
+    opts: &RefineOptions,
+    mut mesh_fn: impl FnMut(&Ponq) -> Result<TriMesh>,
+) -> Result<Refinement> {
+    let mut out = Refinement {
+        mesh: mesh.clone(),
+        ..Default::default()
+    };
+    let mut spent = Duration::ZERO;
+    if mesh.faces.is_empty() {
+        return Ok(out);
+    }
+    let mut current = mesh.clone();
+    let mut current_ponq: Option<Ponq> = None;
+    let mut best = f64::INFINITY;
+    for round in 0..=opts.iterations {
+        let t = Instant::now();
+        let s = grid_samples(grid, &current, opts)?;
+        spent += t.elapsed();
+        out.residuals.push(s.residual);
+        if s.residual < best {
+            best = s.residual;
+            out.mesh = current.clone();
+            out.ponq = current_ponq.clone();
+            out.rounds_kept = round;
+        } else {
+            break;
+        }
+        out.samples = (s.band_nodes, s.dropped);
+        if round == opts.iterations || s.points.is_empty() {
+            break;
+        }
+        let t = Instant::now();
+        let (p, _) = refit(ponq, &s, grid.h, opts)?;
+        spent += t.elapsed();
+        current = mesh_fn(&p)?;
+        if current.faces.is_empty() {
+            break;
+        }
+        current_ponq = Some(p);
+    }
+    out.time = spent;
+    Ok(out)
+}
+
+#[inline]
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline]
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[inline]
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}

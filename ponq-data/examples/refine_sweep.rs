@@ -79,6 +79,7 @@ fn main() -> Result<()> {
             "min_samples" => o.min_samples = f()? as usize,
             "iterations" => o.iterations = f()? as usize,
             "merge" => merge = f()?,
+            "share" => o.share = f()?,
             "samples" => samples = f()? as usize,
             "only" => only = Some(v.split(',').map(String::from).collect()),
             _ => bail!("unknown key {k}"),

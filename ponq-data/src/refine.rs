@@ -135,6 +135,10 @@ pub struct RefineOptions {
     pub iterations: usize,
     /// Solve the refitted v* around the network's v* (true) or around its point (false).
     pub around_vstar: bool,
+    /// 0: each sample goes to its nearest point only (Voronoi cells). Otherwise a sample
+    /// counts for every point (of its 8 nearest) within this many cells, weighted by
+    /// `exp(-(dist / (share / 2))^2)`.
+    pub share: f64,
 }
 
 impl Default for RefineOptions {
@@ -144,11 +148,12 @@ impl Default for RefineOptions {
             radius: 1.0,
             max_shift: 1.0,
             ball_tolerance: 0.05,
-            prior: 0.0,
+            prior: 0.1,
             normals: false,
             min_samples: 1,
             iterations: 2,
             around_vstar: false,
+            share: 0.5,
         }
     }
 }
@@ -156,8 +161,8 @@ impl Default for RefineOptions {
 /// What [`check_distance`] measured on the nodes near the surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DistanceCheck {
-    /// Nodes with `0.3 < |d| < 2` cells (and two nodes from the grid's sides) that were
-    /// tested.
+    /// Nodes with `1 < |d| < 3` cells (two nodes or more from the grid's sides, not on a
+    /// truncated plateau) that were tested.
     pub band_nodes: usize,
     /// Median over them of the steepest descent rate of `|d|` towards the surface: the
     /// largest `sign(d(x)) (d(x) - d(y)) / |x - y|` over the nodes `y` of the 5x5x5 block
@@ -172,15 +177,16 @@ pub struct DistanceCheck {
 
 impl DistanceCheck {
     /// Whether the grid looks like a true signed distance near its surface: at most 1% of
-    /// the tested nodes steeper than 1, a median steepest rate of at least 0.91 and at least
-    /// 55% of the nodes above 0.9. Scaled, smoothed or noisy fields fail (measured on grids
+    /// the tested nodes steeper than 1, a median steepest rate of at least 0.92 and at least
+    /// 60% of the nodes above 0.9. Scaled, smoothed or noisy fields fail (measured on grids
     /// made so from exact ones: `docs/refinement.md`); a truncated one passes (its band is
-    /// exact).
+    /// exact). Nodes closer than one cell are left out: next to a part thinner than a cell
+    /// the descent crosses to the other side, so exact grids of thin parts look smoothed there.
     pub fn is_distance(&self) -> bool {
         self.band_nodes > 0
             && self.steeper_than_one as f64 <= 0.01 * self.band_nodes as f64
-            && self.steepest_median >= 0.91
-            && self.steepest_unit_fraction >= 0.55
+            && self.steepest_median >= 0.92
+            && self.steepest_unit_fraction >= 0.6
     }
 }
 
@@ -212,6 +218,16 @@ pub fn check_distance(grid: &DistanceGrid) -> DistanceCheck {
             (o, 1.0 / (l * h))
         })
         .collect();
+    // A truncated field clamps many nodes to its extreme values: leave those out.
+    let (vmin, vmax) = grid
+        .values
+        .iter()
+        .fold((0.0f64, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+    let count_at = |x: f64| grid.values.iter().filter(|&&v| v == x).count();
+    let many = grid.values.len() / 100;
+    let clamp_hi = (vmax > 0.0 && count_at(vmax) > many).then_some(vmax);
+    let clamp_lo = (vmin < 0.0 && count_at(vmin) > many).then_some(vmin);
+    let clamped = |v: f64| Some(v) == clamp_hi || Some(v) == clamp_lo;
     let rates: Vec<f64> = (R..n0.saturating_sub(R))
         .into_par_iter()
         .flat_map_iter(|i| {
@@ -219,7 +235,7 @@ pub fn check_distance(grid: &DistanceGrid) -> DistanceCheck {
             (R..n1.saturating_sub(R)).flat_map(move |j| {
                 (R..n2.saturating_sub(R)).filter_map(move |k| {
                     let v = grid.values[grid.index(i, j, k)];
-                    if !(v.abs() > 0.3 * h && v.abs() < 2.0 * h) {
+                    if !(v.abs() > h && v.abs() < 3.0 * h) || clamped(v) {
                         return None;
                     }
                     let sign = v.signum();
@@ -431,22 +447,45 @@ pub fn refit(
         return Ok((ponq.clone(), stats));
     };
     let r2 = (opts.radius * h).powi(2);
-    let nearest = index.nearest_many(&samples.points);
     let m = ponq.len();
     let mut quad = vec![Quadric::zero(); m];
     let mut nsum = vec![[0.0f64; 3]; m];
     let mut count = vec![0usize; m];
-    for (s, &(i, d2)) in nearest.iter().enumerate() {
-        if d2 > r2 {
-            continue;
-        }
-        let i = i as usize;
-        quad[i] += Quadric::from_plane(samples.points[s], samples.normals[s]);
+    let mut weight = vec![0.0f64; m];
+    let mut add = |i: usize, s: usize, w: f64| {
+        quad[i] += Quadric::from_plane(samples.points[s], samples.normals[s]) * w;
         for a in 0..3 {
-            nsum[i][a] += samples.normals[s][a];
+            nsum[i][a] += w * samples.normals[s][a];
         }
         count[i] += 1;
-        stats.assigned += 1;
+        weight[i] += w;
+    };
+    if opts.share > 0.0 {
+        let share2 = (opts.share * h).powi(2);
+        let sigma2 = (0.5 * opts.share * h).powi(2);
+        let near: Vec<Vec<(u32, f64)>> = samples
+            .points
+            .par_iter()
+            .map(|p| index.nearest_k(p, 8))
+            .collect();
+        for (s, list) in near.iter().enumerate() {
+            let mut any = false;
+            for &(i, d2) in list {
+                if d2 <= share2 {
+                    add(i as usize, s, (-d2 / sigma2).exp());
+                    any = true;
+                }
+            }
+            stats.assigned += usize::from(any);
+        }
+    } else {
+        let nearest = index.nearest_many(&samples.points);
+        for (s, &(i, d2)) in nearest.iter().enumerate() {
+            if d2 <= r2 {
+                add(i as usize, s, 1.0);
+                stats.assigned += 1;
+            }
+        }
     }
     let mut quadrics = ponq.quadrics.clone();
     let mut normals = ponq.normals.clone();
@@ -455,7 +494,7 @@ pub fn refit(
         if count[i] < opts.min_samples.max(1) {
             continue;
         }
-        let qs = quad[i] * (1.0 / count[i] as f64);
+        let qs = quad[i] * (1.0 / weight[i]);
         let net = ponq.quadrics[i];
         let (tn, ts) = (net.a.trace(), qs.a.trace());
         if !(ts > 0.0) {

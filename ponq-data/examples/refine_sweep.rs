@@ -9,7 +9,7 @@
 //! ply,stl}` is the ground truth (normalised here as `ponq-prep sdf` does). The
 //! group of a shape is the part of its id before `__` (e.g. `cad__part`). KEY=VALUE set
 //! `RefineOptions` fields (band, radius, max_shift, ball_tolerance, prior, normals,
-//! min_samples, iterations, around_vstar), `merge` (degrees, default 15), `samples`
+//! min_samples, rounds, around_vstar, share, cutoff, clear), `merge` (degrees, default 15), `samples`
 //! (metric samples, default 100000) and `only` (a comma-separated list of ids).
 
 use std::collections::BTreeMap;
@@ -28,7 +28,11 @@ fn read_prediction(path: &PathBuf) -> Result<(Ponq, Vec<[u32; 3]>)> {
         .into_iter()
         .map(|(n, a)| (n, a.data))
         .collect();
-    let get = |n: &str| arrays.get(n).with_context(|| format!("{} lacks {n}", path.display()));
+    let get = |n: &str| {
+        arrays
+            .get(n)
+            .with_context(|| format!("{} lacks {n}", path.display()))
+    };
     let v3 = |d: &Vec<f64>| d.chunks(3).map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
     let quadrics = get("quadrics")?
         .chunks(16)
@@ -65,6 +69,8 @@ fn main() -> Result<()> {
     let mut merge = 15.0;
     let mut samples = 100_000;
     let mut only: Option<Vec<String>> = None;
+    let mut all_share = false;
+
     for kv in &args[2..] {
         let (k, v) = kv.split_once('=').context("KEY=VALUE expected")?;
         let f = || v.parse::<f64>().with_context(|| format!("{k}={v}"));
@@ -77,9 +83,12 @@ fn main() -> Result<()> {
             "normals" => o.normals = v == "1" || v == "true",
             "around_vstar" => o.around_vstar = v == "1" || v == "true",
             "min_samples" => o.min_samples = f()? as usize,
-            "iterations" => o.iterations = f()? as usize,
+            "iterations" | "rounds" => o.rounds = Some(f()? as usize),
             "merge" => merge = f()?,
             "share" => o.share = f()?,
+            "cutoff" => o.cutoff = f()?,
+            "all_share" => all_share = v == "1",
+            "clear" => o.clear = v == "1",
             "samples" => samples = f()? as usize,
             "only" => only = Some(v.split(',').map(String::from).collect()),
             _ => bail!("unknown key {k}"),
@@ -135,8 +144,26 @@ fn main() -> Result<()> {
         let base = mesh_of(&raw)?;
         let t = Instant::now();
         let check = check_distance(&grid);
-        let r = refine(&raw, &base, &grid, &o, |p| {
-            mesh_of(p).map_err(|e| ponq_data::DataError::Invalid(format!("{e:#}")))
+        let sharing = if merge > 0.0 && !all_share {
+            Some(
+                ponq_mesh::lite::smooth_points(&raw, &cells, merge)?
+                    .iter()
+                    .map(|&s| !s)
+                    .collect::<Vec<bool>>(),
+            )
+        } else {
+            None
+        };
+        let r = refine(&raw, &base, &grid, &o, sharing.as_deref(), |p| {
+            let mut q = if merge > 0.0 {
+                ponq_mesh::lite::merge_smooth_cells(p, &cells, merge)?
+            } else {
+                p.clone()
+            };
+            if o.clear {
+                ponq_data::refine::clear_balls(&grid, &mut q);
+            }
+            Ok(mesh_ponq(&q, &mopts)?.mesh)
         })?;
         let secs = t.elapsed().as_secs_f64();
         let mb = compare(&base, &gt, &mopt);
@@ -160,13 +187,20 @@ fn main() -> Result<()> {
             mr.ef1,
             res.join(" "),
             r.rounds_kept,
-            if check.is_distance() { String::new() } else { format!("NOT-DISTANCE ({check}) ") },
+            if check.is_distance() {
+                String::new()
+            } else {
+                format!("NOT-DISTANCE ({check}) ")
+            },
             if valid { "" } else { "INVALID" }
         );
         for (k, m) in [(0usize, mb), (1, mr)] {
             let s = sums.entry((group.clone(), k)).or_default();
             s.n += 1;
-            for (a, x) in [m.cd_x1e5, m.f1, m.nc, m.ecd_x1e2, m.ef1].into_iter().enumerate() {
+            for (a, x) in [m.cd_x1e5, m.f1, m.nc, m.ecd_x1e2, m.ef1]
+                .into_iter()
+                .enumerate()
+            {
                 s.m[a] += x;
             }
             if k == 1 {
@@ -175,7 +209,9 @@ fn main() -> Result<()> {
             }
         }
     }
-    println!("\ngroup      rows      n      CD     F1     NC     ECD    EF1  valid  refine s/shape");
+    println!(
+        "\ngroup      rows      n      CD     F1     NC     ECD    EF1  valid  refine s/shape"
+    );
     for ((g, k), s) in &sums {
         let n = s.n as f64;
         println!(

@@ -131,14 +131,27 @@ pub struct RefineOptions {
     pub normals: bool,
     /// Points need this many samples to be refitted (the others keep the network's values).
     pub min_samples: usize,
-    /// Rounds of mesh -> samples -> refit -> mesh.
-    pub iterations: usize,
+    /// Rounds of mesh -> samples -> refit -> mesh; `None`: [`RefineOptions::rounds_for`].
+    pub rounds: Option<usize>,
     /// Solve the refitted v* around the network's v* (true) or around its point (false).
     pub around_vstar: bool,
     /// 0: each sample goes to its nearest point only (Voronoi cells). Otherwise a sample
-    /// counts for every point (of its 8 nearest) within this many cells, weighted by
-    /// `exp(-(dist / (share / 2))^2)`.
+    /// counts for every sharing point (of its 8 nearest) within this many cells, weighted by
+    /// `exp(-(dist / (share / 2))^2)` (see [`refit`]'s `sharing`).
     pub share: f64,
+    /// Relative singular-value cut-off of the refitted v* solve (the mesher's default is
+    /// `ponq_mesh::quadric::SVD_CUTOFF`, 0.05).
+    pub cutoff: f64,
+    /// Move the refitted PoNQ's v* out of the nodes' balls before meshing ([`clear_balls`]).
+    pub clear: bool,
+}
+
+impl RefineOptions {
+    /// The default number of rounds on a grid of `cells` per side: 2 up to 48 cells, 1 above
+    /// (a second round gains less on finer grids and doubles the time).
+    pub fn rounds_for(cells: usize) -> usize {
+        if cells <= 48 { 2 } else { 1 }
+    }
 }
 
 impl Default for RefineOptions {
@@ -151,9 +164,11 @@ impl Default for RefineOptions {
             prior: 0.1,
             normals: false,
             min_samples: 1,
-            iterations: 2,
+            rounds: None,
             around_vstar: false,
             share: 0.5,
+            cutoff: ponq_mesh::quadric::SVD_CUTOFF,
+            clear: true,
         }
     }
 }
@@ -287,7 +302,7 @@ pub struct GridSamples {
 }
 
 /// Offsets of the neighbour nodes whose balls a sample is tested against.
-const REACH: isize = 3;
+const REACH: isize = 2;
 
 /// One sample per band node (`|d| < band` cells): `s = x + |d| u` with `u` the direction
 /// from `x` to its closest point on `mesh`, pushed out of the neighbour nodes' balls along
@@ -301,7 +316,7 @@ pub fn grid_samples(
     mesh: &TriMesh,
     opts: &RefineOptions,
 ) -> Result<GridSamples> {
-    let sdf = MeshSdf::new(mesh)?;
+    let sdf = MeshSdf::for_distances(mesh)?;
     let h = grid.h;
     let band = opts.band * h;
     let nodes: Vec<usize> = (0..grid.values.len())
@@ -329,15 +344,29 @@ pub fn grid_samples(
             } else {
                 return (None, res);
             };
-            let mut s = add(x, u.map(|c| c * r));
+            let s0 = add(x, u.map(|c| c * r));
+            let mut s = s0;
             if r > 0.0 {
+                // The balls that could hold the sample while it moves less than `slack`.
+                let slack = 0.5 * h;
+                let mut balls: Vec<([f64; 3], f64)> = Vec::with_capacity(32);
+                for_each_neighbour(grid, [i, j, k], |c, rc| {
+                    if norm(sub(s0, c)) < rc + slack {
+                        balls.push((c, rc));
+                    }
+                });
+                let deepest = |s: [f64; 3]| {
+                    balls.iter().fold((([0.0; 3], 0.0), 0.0), |best, &(c, rc)| {
+                        let pen = rc - norm(sub(s, c));
+                        if pen > best.1 { ((c, rc), pen) } else { best }
+                    })
+                };
                 // Push the sample out of the neighbours' balls, back onto x's sphere.
                 for _ in 0..4 {
-                    let (worst, pen) = deepest_ball(grid, [i, j, k], s);
+                    let ((c, rc), pen) = deepest(s);
                     if pen <= 1e-3 * h {
                         break;
                     }
-                    let (c, rc) = worst;
                     let cs = sub(s, c);
                     let l = norm(cs);
                     if l == 0.0 {
@@ -351,7 +380,16 @@ pub fn grid_samples(
                     }
                     s = add(x, xs.map(|v| v * r / lx));
                 }
-                if deepest_ball(grid, [i, j, k], s).1 > tol {
+                let pen = if norm(sub(s, s0)) < slack {
+                    deepest(s).1
+                } else {
+                    let mut worst = 0.0f64;
+                    for_each_neighbour(grid, [i, j, k], |c, rc| {
+                        worst = worst.max(rc - norm(sub(s, c)));
+                    });
+                    worst
+                };
+                if pen > tol {
                     return (None, res);
                 }
             }
@@ -389,9 +427,87 @@ pub fn grid_samples(
     Ok(g)
 }
 
-/// The neighbour node (centre, radius) whose open ball `s` enters deepest, and how deep.
-fn deepest_ball(grid: &DistanceGrid, at: [usize; 3], s: [f64; 3]) -> (([f64; 3], f64), f64) {
-    let mut best = (([0.0; 3], 0.0), 0.0);
+/// How well `mesh` fits the grid's distances: [`GridSamples::residual`] alone (no samples).
+///
+/// # Errors
+/// As [`grid_samples`].
+pub fn fit_residual(grid: &DistanceGrid, mesh: &TriMesh, opts: &RefineOptions) -> Result<f64> {
+    let sdf = MeshSdf::for_distances(mesh)?;
+    let band = opts.band * grid.h;
+    let (sq, n) = (0..grid.values.len())
+        .into_par_iter()
+        .filter(|&f| grid.values[f].abs() < band)
+        .map(|f| {
+            let [i, j, k] = grid.coords(f);
+            let x = grid.node(i, j, k);
+            let (y, _) = sdf.closest_point_and_normal(x);
+            let res = (norm(sub(y, x)) - grid.values[f].abs()) / grid.h;
+            (res * res, 1usize)
+        })
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    Ok(if n == 0 { 0.0 } else { (sq / n as f64).sqrt() })
+}
+
+/// Moves every v* of `ponq` out of the nodes' open balls (the surface enters none of them,
+/// so neither should a vertex): up to four times, the v* goes radially to the sphere of the
+/// ball it enters deepest. Returns how many v* moved.
+pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq) -> usize {
+    let mut vstars = ponq.vstars();
+    let h = grid.h;
+    let moved: Vec<Option<[f64; 3]>> = vstars
+        .par_iter()
+        .map(|&v| {
+            let c: [isize; 3] = std::array::from_fn(|a| ((v[a] - grid.lo[a]) / h).round() as isize);
+            if (0..3).any(|a| c[a] < 0 || c[a] >= grid.dims[a] as isize) {
+                return None;
+            }
+            let at = c.map(|x| x as usize);
+            let mut p = v;
+            let mut changed = false;
+            for _ in 0..4 {
+                let mut worst = (([0.0; 3], 0.0), 1e-3 * h);
+                for_each_neighbour(grid, at, |c, rc| {
+                    let pen = rc - norm(sub(p, c));
+                    if pen > worst.1 {
+                        worst = ((c, rc), pen);
+                    }
+                });
+                // The node `at` itself.
+                let rc = grid.values[grid.index(at[0], at[1], at[2])].abs();
+                let cc = grid.node(at[0], at[1], at[2]);
+                if rc - norm(sub(p, cc)) > worst.1 {
+                    worst = ((cc, rc), rc - norm(sub(p, cc)));
+                }
+                if worst.1 <= 1e-3 * h {
+                    break;
+                }
+                let ((c, rc), _) = worst;
+                let cp = sub(p, c);
+                let l = norm(cp);
+                if l == 0.0 {
+                    break;
+                }
+                p = add(c, cp.map(|x| x * rc / l));
+                changed = true;
+            }
+            changed.then_some(p)
+        })
+        .collect();
+    let mut count = 0;
+    for (v, m) in vstars.iter_mut().zip(moved) {
+        if let Some(p) = m {
+            *v = p;
+            count += 1;
+        }
+    }
+    ponq.vstars = Some(vstars);
+    count
+}
+
+/// Calls `f(centre, radius)` for the balls of the nodes within [`REACH`] nodes of `at`
+/// (itself excluded).
+#[inline]
+fn for_each_neighbour(grid: &DistanceGrid, at: [usize; 3], mut f: impl FnMut([f64; 3], f64)) {
     let range = |a: usize| {
         let lo = at[a].saturating_sub(REACH as usize);
         let hi = (at[a] + REACH as usize).min(grid.dims[a] - 1);
@@ -399,20 +515,15 @@ fn deepest_ball(grid: &DistanceGrid, at: [usize; 3], s: [f64; 3]) -> (([f64; 3],
     };
     for i in range(0) {
         for j in range(1) {
+            let row = grid.index(i, j, 0);
             for k in range(2) {
                 if [i, j, k] == at {
                     continue;
                 }
-                let r = grid.values[grid.index(i, j, k)].abs();
-                let c = grid.node(i, j, k);
-                let pen = r - norm(sub(s, c));
-                if pen > best.1 {
-                    best = ((c, r), pen);
-                }
+                f(grid.node(i, j, k), grid.values[row + k].abs());
             }
         }
     }
-    best
 }
 
 /// What [`refit`] changed.
@@ -425,19 +536,33 @@ pub struct RefitStats {
 }
 
 /// Refits a PoNQ to grid samples: each sample goes to its nearest point (by v*) within
-/// `radius` cells; a point with at least `min_samples` samples gets the mean of their plane
-/// quadrics, scaled to the trace of its own quadric's `A` (and mixed with it by `prior`), and
-/// its v* solved again; the others are unchanged. Points, and normals unless
-/// `opts.normals`, are kept.
+/// `radius` cells, and with `opts.share > 0` also to the sharing points near it (`sharing`:
+/// one flag per point, `None` for all; the points of cells that will be merged into one need
+/// no sharing: their cell already gathers the samples of all its points); a point with at
+/// least `min_samples` samples gets the weighted mean of their plane quadrics, scaled to the
+/// trace of its own quadric's `A` (and mixed with it by `prior`), and its v* solved again;
+/// the others are unchanged. Points, and normals unless `opts.normals`, are kept.
 ///
 /// # Errors
-/// [`DataError::Invalid`] for a non-positive `h`; errors of [`Ponq::new`].
+/// [`DataError::Invalid`] for a non-positive `h` or a `sharing` of the wrong length; errors
+/// of [`Ponq::new`].
 pub fn refit(
     ponq: &Ponq,
     samples: &GridSamples,
     h: f64,
     opts: &RefineOptions,
+    sharing: Option<&[bool]>,
 ) -> Result<(Ponq, RefitStats)> {
+    if let Some(f) = sharing
+        && f.len() != ponq.len()
+    {
+        return Err(DataError::Invalid(format!(
+            "{} sharing flags for {} points",
+            f.len(),
+            ponq.len()
+        )));
+    }
+    let shares = |i: usize| sharing.is_none_or(|f| f[i]);
     if !(h > 0.0 && h.is_finite()) {
         return Err(DataError::Invalid(format!("invalid cell size {h}")));
     }
@@ -466,12 +591,19 @@ pub fn refit(
         let near: Vec<Vec<(u32, f64)>> = samples
             .points
             .par_iter()
-            .map(|p| index.nearest_k(p, 8))
+            .map(|p| index.nearest_k_within(p, 8, share2.max(r2)))
             .collect();
         for (s, list) in near.iter().enumerate() {
             let mut any = false;
+            if let Some(&(i0, d0)) = list.first()
+                && !shares(i0 as usize)
+                && d0 <= r2
+            {
+                add(i0 as usize, s, 1.0);
+                any = true;
+            }
             for &(i, d2) in list {
-                if d2 <= share2 {
+                if shares(i as usize) && d2 <= share2 {
                     add(i as usize, s, (-d2 / sigma2).exp());
                     any = true;
                 }
@@ -487,40 +619,51 @@ pub fn refit(
             }
         }
     }
+    // Per point: the refitted (quadric, v*, normal), or None to keep the network's.
+    let refitted: Vec<Option<(Quadric, [f64; 3], [f64; 3])>> = (0..m)
+        .into_par_iter()
+        .map(|i| {
+            if count[i] < opts.min_samples.max(1) {
+                return None;
+            }
+            let qs = quad[i] * (1.0 / weight[i]);
+            let net = ponq.quadrics[i];
+            let (tn, ts) = (net.a.trace(), qs.a.trace());
+            if !(ts > 0.0) {
+                return None;
+            }
+            let scale = if tn > 0.0 { tn / ts } else { 1.0 };
+            let q = qs * (scale * (1.0 - opts.prior)) + net * opts.prior;
+            let reference = if opts.around_vstar {
+                vstars[i]
+            } else {
+                ponq.points[i]
+            };
+            let v = q.optimal_point(reference, opts.cutoff);
+            if v.iter().any(|c| !c.is_finite()) {
+                return None;
+            }
+            let mut n = ponq.normals[i];
+            if opts.normals {
+                let l = norm(nsum[i]);
+                let keep = norm(n);
+                if l > 0.0 && keep > 0.0 {
+                    n = nsum[i].map(|c| c / l * keep);
+                }
+            }
+            Some((q, v, n))
+        })
+        .collect();
     let mut quadrics = ponq.quadrics.clone();
     let mut normals = ponq.normals.clone();
-    let mut new_vstars = vstars.clone();
-    for i in 0..m {
-        if count[i] < opts.min_samples.max(1) {
-            continue;
+    let mut new_vstars = vstars;
+    for (i, r) in refitted.into_iter().enumerate() {
+        if let Some((q, v, n)) = r {
+            quadrics[i] = q;
+            new_vstars[i] = v;
+            normals[i] = n;
+            stats.refitted += 1;
         }
-        let qs = quad[i] * (1.0 / weight[i]);
-        let net = ponq.quadrics[i];
-        let (tn, ts) = (net.a.trace(), qs.a.trace());
-        if !(ts > 0.0) {
-            continue;
-        }
-        let scale = if tn > 0.0 { tn / ts } else { 1.0 };
-        let q = qs * (scale * (1.0 - opts.prior)) + net * opts.prior;
-        let reference = if opts.around_vstar {
-            vstars[i]
-        } else {
-            ponq.points[i]
-        };
-        let v = q.optimal_point(reference, ponq_mesh::quadric::SVD_CUTOFF);
-        if v.iter().any(|c| !c.is_finite()) {
-            continue;
-        }
-        quadrics[i] = q;
-        new_vstars[i] = v;
-        if opts.normals {
-            let l = norm(nsum[i]);
-            let keep = norm(ponq.normals[i]);
-            if l > 0.0 && keep > 0.0 {
-                normals[i] = nsum[i].map(|c| c / l * keep);
-            }
-        }
-        stats.refitted += 1;
     }
     let out = Ponq::new(ponq.points.clone(), normals, quadrics, Some(new_vstars))?;
     Ok((out, stats))
@@ -544,9 +687,10 @@ pub struct Refinement {
 }
 
 /// Refines a PoNQ against a distance grid: starting from `mesh` (the mesh of `ponq`),
-/// `opts.iterations` times take samples along the current mesh's directions, refit `ponq`
-/// (always the original, so errors do not compound) and mesh it with `mesh_fn`; a round's
-/// mesh is kept only if it fits the distances better than the best so far.
+/// `opts.rounds` times take samples along the current mesh's directions, refit `ponq`
+/// (always the original, so errors do not compound; `sharing` as in [`refit`]) and mesh it
+/// with `mesh_fn`; a round's mesh is kept only if it fits the distances better than the best
+/// so far.
 ///
 /// # Errors
 /// Errors of [`grid_samples`], [`refit`] and `mesh_fn`.
@@ -555,6 +699,7 @@ pub fn refine(
     mesh: &TriMesh,
     grid: &DistanceGrid,
     opts: &RefineOptions,
+    sharing: Option<&[bool]>,
     mut mesh_fn: impl FnMut(&Ponq) -> Result<TriMesh>,
 ) -> Result<Refinement> {
     let mut out = Refinement {
@@ -568,8 +713,24 @@ pub fn refine(
     let mut current = mesh.clone();
     let mut current_ponq: Option<Ponq> = None;
     let mut best = f64::INFINITY;
-    for round in 0..=opts.iterations {
+    let cells = grid.dims.iter().max().map_or(1, |&d| d - 1);
+    let rounds = opts
+        .rounds
+        .unwrap_or_else(|| RefineOptions::rounds_for(cells));
+    for round in 0..=rounds {
         let t = Instant::now();
+        if round == rounds {
+            // The last mesh only needs its fit.
+            let r = fit_residual(grid, &current, opts)?;
+            spent += t.elapsed();
+            out.residuals.push(r);
+            if r < best {
+                out.mesh = current.clone();
+                out.ponq = current_ponq.clone();
+                out.rounds_kept = round;
+            }
+            break;
+        }
         let s = grid_samples(grid, &current, opts)?;
         spent += t.elapsed();
         out.residuals.push(s.residual);
@@ -582,11 +743,11 @@ pub fn refine(
             break;
         }
         out.samples = (s.band_nodes, s.dropped);
-        if round == opts.iterations || s.points.is_empty() {
+        if s.points.is_empty() {
             break;
         }
         let t = Instant::now();
-        let (p, _) = refit(ponq, &s, grid.h, opts)?;
+        let (p, _) = refit(ponq, &s, grid.h, opts, sharing)?;
         spent += t.elapsed();
         current = mesh_fn(&p)?;
         if current.faces.is_empty() {

@@ -74,7 +74,11 @@ fn main() -> Result<()> {
                 ),
             ],
         )?;
-        println!("{}: {m} points, {:.0} ms network", path.display(), p.network.as_secs_f64() * 1e3);
+        println!(
+            "{}: {m} points, {:.0} ms network",
+            path.display(),
+            p.network.as_secs_f64() * 1e3
+        );
     }
     Ok(())
 }

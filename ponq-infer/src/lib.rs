@@ -32,6 +32,7 @@ pub mod tiles;
 
 pub use frame::Frame;
 pub use reconstruct::{
-    InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, finish, infer, predict,
+    InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, finish, infer,
+    predict,
 };
 pub use tiles::predict_tiled;

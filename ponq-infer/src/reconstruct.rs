@@ -12,7 +12,9 @@ use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{Ponq, TriMesh};
 use ponq_model::{PonqNet, network_input_scale};
 
-use ponq_data::refine::{DistanceCheck, DistanceGrid, RefineOptions, check_distance, refine};
+use ponq_data::refine::{
+    DistanceCheck, DistanceGrid, RefineOptions, check_distance, clear_balls, refine,
+};
 
 use crate::frame::{Frame, ponq_to_user};
 use crate::tiles::predict_tiled;
@@ -384,9 +386,23 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
     if wanted && !mesh.faces.is_empty() && opts.open.is_none() {
         // Every round's merged PoNQ and meshing statistics, to report the kept one's.
         let mut rounds: Vec<(Ponq, MeshingStats)> = Vec::new();
-        let r = refine(&p.ponq, &mesh, &grid, &opts.refine_options, |raw| {
-            let (q, _) = convert(raw, &p.cells, frame.n, opts)
+        // Points of cells merged into one need no shared samples (see `refit`).
+        let sharing: Option<Vec<bool>> = match opts.merge_smooth {
+            Some(angle) => Some(
+                ponq_mesh::lite::smooth_points(&p.ponq, &p.cells, angle)?
+                    .into_iter()
+                    .map(|s| !s)
+                    .collect(),
+            ),
+            None => None,
+        };
+        let ro = &opts.refine_options;
+        let r = refine(&p.ponq, &mesh, &grid, ro, sharing.as_deref(), |raw| {
+            let (mut q, _) = convert(raw, &p.cells, frame.n, opts)
                 .map_err(|e| ponq_data::DataError::Invalid(format!("{e:#}")))?;
+            if ro.clear {
+                clear_balls(&grid, &mut q);
+            }
             let out = mesh_ponq(&q, &mopts)?;
             rounds.push((q, out.stats));
             Ok(out.mesh)

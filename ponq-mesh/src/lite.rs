@@ -74,23 +74,7 @@ pub fn merge_smooth_cells(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -
             "the normal angle for merging must be in [0, 180] degrees, got {max_angle_deg}"
         )));
     }
-    let min_cos = max_angle_deg.to_radians().cos();
-    let unit: Vec<Option<[f64; 3]>> = ponq
-        .normals
-        .iter()
-        .map(|n| {
-            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            (l > 0.0 && l.is_finite()).then(|| n.map(|x| x / l))
-        })
-        .collect();
-    let smooth = |members: &[usize]| {
-        members.iter().enumerate().all(|(k, &i)| {
-            members[k + 1..].iter().all(|&j| match (unit[i], unit[j]) {
-                (Some(a), Some(b)) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= min_cos,
-                _ => false,
-            })
-        })
-    };
+    let smooth = smooth_test(ponq, max_angle_deg);
     let groups = group_by_cell(cells, |c| c);
     let vstars = ponq.vstars();
     let mut out = Merged::default();
@@ -107,6 +91,53 @@ pub fn merge_smooth_cells(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -
         }
     }
     out.into_ponq()
+}
+
+/// Which points [`merge_smooth_cells`] merges with the other points of their cell (a cell of
+/// two points or more whose normals agree within `max_angle_deg` degrees): `true` for each
+/// point of a smooth cell.
+///
+/// # Errors
+/// As [`merge_smooth_cells`].
+pub fn smooth_points(ponq: &Ponq, cells: &[[u32; 3]], max_angle_deg: f64) -> Result<Vec<bool>> {
+    check_one_cell_per_point(ponq, cells)?;
+    if !(0.0..=180.0).contains(&max_angle_deg) {
+        return Err(Error::InvalidInput(format!(
+            "the normal angle for merging must be in [0, 180] degrees, got {max_angle_deg}"
+        )));
+    }
+    let smooth = smooth_test(ponq, max_angle_deg);
+    let mut out = vec![false; ponq.len()];
+    for (_, members) in group_by_cell(cells, |c| c) {
+        if members.len() > 1 && smooth(&members) {
+            for i in members {
+                out[i] = true;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Whether the points `members` have pairwise normals within `max_angle_deg` degrees (a
+/// zero normal agrees with nothing).
+fn smooth_test(ponq: &Ponq, max_angle_deg: f64) -> impl Fn(&[usize]) -> bool {
+    let min_cos = max_angle_deg.to_radians().cos();
+    let unit: Vec<Option<[f64; 3]>> = ponq
+        .normals
+        .iter()
+        .map(|n| {
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            (l > 0.0 && l.is_finite()).then(|| n.map(|x| x / l))
+        })
+        .collect();
+    move |members: &[usize]| {
+        members.iter().enumerate().all(|(k, &i)| {
+            members[k + 1..].iter().all(|&j| match (unit[i], unit[j]) {
+                (Some(a), Some(b)) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= min_cos,
+                _ => false,
+            })
+        })
+    }
 }
 
 /// [`Error::InvalidInput`] unless `cells` gives one cell per point of `ponq`.

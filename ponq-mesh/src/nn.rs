@@ -49,6 +49,27 @@ impl PointIndex {
         v
     }
 
+    /// `(index, squared distance)` of at most `k` points nearest to `q` among those within
+    /// squared distance `r2`, nearest first (a bounded search: cheaper than
+    /// [`PointIndex::nearest_k`] when few points are that close).
+    pub fn nearest_k_within(&self, q: &[f64; 3], k: usize, r2: f64) -> Vec<(u32, f64)> {
+        let Some(k) = std::num::NonZeroUsize::new(k) else {
+            return Vec::new();
+        };
+        let mut v: Vec<(u32, f64)> = self
+            .tree
+            .query(q)
+            .nearest_n::<SquaredEuclidean<f64>>(k)
+            .within(r2)
+            .execute()
+            .into_iter()
+            .map(|r| (r.item, r.distance))
+            .filter(|r| r.1 <= r2)
+            .collect();
+        v.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        v
+    }
+
     /// Nearest points of many queries, in parallel: `(index, squared distance)` per query.
     pub fn nearest_many(&self, queries: &[[f64; 3]]) -> Vec<(u32, f64)> {
         use rayon::prelude::*;
@@ -82,6 +103,12 @@ mod tests {
                 .collect();
             all.sort_by(f64::total_cmp);
             for (j, (_, dk)) in k.iter().enumerate() {
+                assert!((dk - all[j]).abs() < 1e-12);
+            }
+            let r2 = all[3] * 1.0000001;
+            let w = idx.nearest_k_within(&q, 8, r2);
+            assert_eq!(w.len(), all.iter().filter(|&&d| d <= r2).count().min(8));
+            for (j, (_, dk)) in w.iter().enumerate() {
                 assert!((dk - all[j]).abs() < 1e-12);
             }
             let best = pts

@@ -238,6 +238,11 @@ struct RunArgs {
     /// Skip the marching cubes baseline.
     #[arg(long)]
     no_mc: bool,
+    /// Also report the PoNQ rows refined against the grid's exact distances (`ponq-infer
+    /// --refine auto`, the default output), named `<name>+refine`, beside the network's
+    /// alone (`<name>`), from the same network run; their time column includes the network.
+    #[arg(long)]
+    refine: bool,
     /// Network weights [default: the shipped model].
     #[arg(long)]
     model: Option<PathBuf>,
@@ -314,6 +319,9 @@ fn run_split(a: RunArgs) -> Result<()> {
         bail!("no shape of {} to evaluate", a.data.display());
     }
     let mut methods = vec![Method::Ponq];
+    if a.refine {
+        methods.push(Method::Refined);
+    }
     if !(0.0..=180.0).contains(&a.merge_smooth) {
         bail!(
             "--merge-smooth takes an angle in [0, 180] degrees, got {}",

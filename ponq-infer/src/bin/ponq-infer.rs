@@ -364,7 +364,11 @@ fn run(args: &Args) -> Result<Outcome> {
         }
         println!(
             "time (ms): {} {:.1}, network {:.1} ({} tiles), to PoNQ {:.1}, meshing {:.1} (delaunay {:.1}, tagging {:.1}, cut {:.1}, manifold {:.1}, extraction {:.1}, flips {:.1}), refinement {:.1}, write {:.1}",
-            if normalization.is_some() { "read + sdf" } else { "read" },
+            if normalization.is_some() {
+                "read + sdf"
+            } else {
+                "read"
+            },
             ms(read_time),
             ms(res.times.network),
             res.tiles,

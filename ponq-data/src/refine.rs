@@ -465,29 +465,25 @@ pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq) -> usize {
             let mut p = v;
             let mut changed = false;
             for _ in 0..4 {
+                // The ball `p` enters deepest (one centred at `p` gives no direction).
                 let mut worst = (([0.0; 3], 0.0), 1e-3 * h);
-                for_each_neighbour(grid, at, |c, rc| {
-                    let pen = rc - norm(sub(p, c));
-                    if pen > worst.1 {
-                        worst = ((c, rc), pen);
+                let mut consider = |c: [f64; 3], rc: f64| {
+                    let l = norm(sub(p, c));
+                    if l > 1e-9 * h && rc - l > worst.1 {
+                        worst = ((c, rc), rc - l);
                     }
-                });
-                // The node `at` itself.
-                let rc = grid.values[grid.index(at[0], at[1], at[2])].abs();
-                let cc = grid.node(at[0], at[1], at[2]);
-                if rc - norm(sub(p, cc)) > worst.1 {
-                    worst = ((cc, rc), rc - norm(sub(p, cc)));
-                }
+                };
+                for_each_neighbour(grid, at, &mut consider);
+                consider(
+                    grid.node(at[0], at[1], at[2]),
+                    grid.values[grid.index(at[0], at[1], at[2])].abs(),
+                );
                 if worst.1 <= 1e-3 * h {
                     break;
                 }
                 let ((c, rc), _) = worst;
                 let cp = sub(p, c);
-                let l = norm(cp);
-                if l == 0.0 {
-                    break;
-                }
-                p = add(c, cp.map(|x| x * rc / l));
+                p = add(c, cp.map(|x| x * rc / norm(cp)));
                 changed = true;
             }
             changed.then_some(p)

@@ -20,7 +20,7 @@ use crate::frame::{Frame, ponq_to_user};
 use crate::tiles::predict_tiled;
 
 /// The default of [`InferOptions::merge_smooth`]: cells whose predicted normals agree within
-/// 15 degrees get one point. Chosen on the shared meshes (models/README.md): the four noisy
+/// 15 degrees get one point. Chosen on the shared meshes (docs/evaluation.md): the four noisy
 /// points of a smooth cell make small creases (free-form ECD at 33^3 0.41 without, 0.13 with,
 /// marching cubes 0.16); 10 degrees removes too few of them, 20 and more cost CD / F1 on CAD.
 pub const DEFAULT_MERGE_SMOOTH_DEG: f64 = 15.0;

@@ -99,7 +99,7 @@ struct Args {
     /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
     /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
     /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
-    /// before 2026-12-03). See README, mesher section.
+    /// before 2026-12-03). See docs/meshing.md.
     #[arg(long, value_name = "RULE", default_value = "inside")]
     small_tets: SmallTetRule,
     /// Same as `--small-tets both` (kept for earlier scripts).

@@ -7,7 +7,7 @@ imported from a checkout of it, unmodified) on a PoNQ .npz (points, normals, qua
 
 prints `V .. F .. seconds ..` (meshing only). With AUTHORS_FLOW=bk their `min_cut` gets
 networkx's Boykov-Kolmogorov flow, on capacities clipped at 0, instead of its default
-preflow-push, whose partition is not always a minimum cut (README, mesher section). With
+preflow-push, whose partition is not always a minimum cut (docs/meshing.md). With
 AUTHORS_CLAMP=1 the `arccos` of their module gets its argument clipped to [-1, 1] (their face
 scores take the arccos of dot products of unit vectors, which rounding puts just above 1 at
 times: NaN capacities). Nothing else of theirs changes. Needs Debian's python3-torch, python3-scipy,

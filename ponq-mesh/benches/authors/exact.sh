@@ -4,7 +4,7 @@
 # (authors_mesh.py): networkx's Boykov-Kolmogorov flow (AUTHORS_FLOW=bk: an exact minimum cut;
 # their default preflow-push partition is not always minimal) and, unless AUTHORS_CLAMP=0,
 # arccos arguments clipped to [-1, 1] (no NaN capacities); then ours on the same PoNQ files,
-# and compares the faces (face_diff.py: vertices matched by position). README, mesher section.
+# and compares the faces (face_diff.py: vertices matched by position). docs/meshing.md.
 #
 #   AUTHORS_PONQ=/path/to/PoNQ/src/utils ponq-mesh/benches/authors/exact.sh [OUT_DIR] [PONQ.npz ...]
 #

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # ponq-mesh side by side with the authors' own mesher output on the shared reference PoNQ files
 # (../shared/data/ponq-reference: each NAME.npz comes with NAME.authors.obj, made by the authors'
-# Python mesher), all scored by score.py against the source mesh (README, mesher section).
+# Python mesher), all scored by score.py against the source mesh (docs/meshing.md).
 # Needs no checkout of their repository: their outputs ship with the files.
 #
 #   ponq-mesh/benches/authors/reference.sh [OUT_DIR]

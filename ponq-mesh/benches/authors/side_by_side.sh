@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # ponq-mesh side by side with the authors' Python mesher on new PoNQ files made from shared CAD
 # meshes (`ponq-fit --save-ponq` at 32^3 and 64^3), both scored by `ponq-eval compare` against the
-# source mesh and checked by `ponq-eval check` (README, mesher section).
+# source mesh and checked by `ponq-eval check` (docs/meshing.md).
 #
 #   AUTHORS_PONQ=/path/to/PoNQ/src/utils ponq-mesh/benches/authors/side_by_side.sh [OUT_DIR] [MESH ...]
 #

@@ -30,7 +30,7 @@ use ponq_mesh::validity;
 struct Args {
     /// Input PoNQ file (.npz).
     input: PathBuf,
-    /// Output mesh (.obj or .ply).
+    /// Output mesh (.obj, .ply or .off).
     #[arg(short, long)]
     output: PathBuf,
     /// Resolution N of the grid the PoNQ was made on (N cells per side): sets the face-score
@@ -73,7 +73,7 @@ struct Args {
     /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
     /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
     /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
-    /// before 2026-12-03). See README, mesher section.
+    /// before 2026-12-03). See docs/meshing.md.
     #[arg(long, value_name = "RULE", default_value = "inside")]
     small_tets: SmallTetRule,
     /// Same as `--small-tets both` (kept for earlier scripts).
@@ -81,7 +81,7 @@ struct Args {
     small_tets_both_ways: bool,
     /// The authors' mesher to the letter: `--small-tets authors --no-crease-flips
     /// --no-manifold`. With an exact minimum cut in their code its output is ours face for
-    /// face (README, mesher section); like theirs it may have non-manifold edges or vertices.
+    /// face (docs/meshing.md); like theirs it may have non-manifold edges or vertices.
     #[arg(long, conflicts_with_all = ["small_tets", "small_tets_both_ways", "lite", "open"])]
     authors_mesher: bool,
     /// Weld tolerance relative to the domain size: v* this close (two v* a rounding apart)

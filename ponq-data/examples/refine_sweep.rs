@@ -87,6 +87,8 @@ fn main() -> Result<()> {
             "merge" => merge = f()?,
             "share" => o.share = f()?,
             "cutoff" => o.cutoff = f()?,
+            "max_move" => o.max_move = f()?,
+            "max_angle" => o.max_angle = f()?,
             "all_share" => all_share = v == "1",
             "clear" => o.clear = v == "1",
             "samples" => samples = f()? as usize,
@@ -161,7 +163,7 @@ fn main() -> Result<()> {
                 p.clone()
             };
             if o.clear {
-                ponq_data::refine::clear_balls(&grid, &mut q);
+                ponq_data::refine::clear_balls(&grid, &mut q, o.max_move);
             }
             Ok(mesh_ponq(&q, &mopts)?.mesh)
         })?;
@@ -169,6 +171,15 @@ fn main() -> Result<()> {
         let mb = compare(&base, &gt, &mopt);
         let mr = compare(&r.mesh, &gt, &mopt);
         let valid = validity::check(&r.mesh).is_valid();
+        if std::env::var_os("SWEEP_INTRUSIONS").is_some() {
+            for d in [0.1, 0.25, 0.5] {
+                eprintln!(
+                    "{id}: intrusions at {d}: network {} refined {}",
+                    ponq_data::refine::intrusions(&grid, &base, d),
+                    ponq_data::refine::intrusions(&grid, &r.mesh, d)
+                );
+            }
+        }
         let group = id.split("__").next().unwrap_or("").to_string();
         let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.3}")).collect();
         println!(

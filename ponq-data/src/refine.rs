@@ -144,6 +144,12 @@ pub struct RefineOptions {
     pub cutoff: f64,
     /// Move the refitted PoNQ's v* out of the nodes' balls before meshing ([`clear_balls`]).
     pub clear: bool,
+    /// A refitted v* farther than this from its point is solved again with fewer directions
+    /// (see [`refit`]).
+    pub max_move: f64,
+    /// A sample counts for a point only if its normal is within this many degrees of the
+    /// point's (samples of the far side of a thin part do not).
+    pub max_angle: f64,
 }
 
 impl RefineOptions {
@@ -169,6 +175,8 @@ impl Default for RefineOptions {
             share: 0.5,
             cutoff: ponq_mesh::quadric::SVD_CUTOFF,
             clear: true,
+            max_move: 1.0,
+            max_angle: 100.0,
         }
     }
 }
@@ -300,6 +308,9 @@ pub struct GridSamples {
     /// the grid's distances.
     pub residual: f64,
 }
+
+/// Depth, in cells, at which a face inside a node's ball counts as an intrusion.
+const INTRUSION_DEPTH: f64 = 0.25;
 
 /// Offsets of the neighbour nodes whose balls a sample is tested against.
 const REACH: isize = 2;
@@ -450,10 +461,12 @@ pub fn fit_residual(grid: &DistanceGrid, mesh: &TriMesh, opts: &RefineOptions) -
 
 /// Moves every v* of `ponq` out of the nodes' open balls (the surface enters none of them,
 /// so neither should a vertex): up to four times, the v* goes radially to the sphere of the
-/// ball it enters deepest. Returns how many v* moved.
-pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq) -> usize {
+/// ball it enters deepest; a v* that would move farther than `max_move` cells stays. Returns
+/// how many v* moved.
+pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq, max_move: f64) -> usize {
     let mut vstars = ponq.vstars();
     let h = grid.h;
+    let max_move = max_move * h;
     let moved: Vec<Option<[f64; 3]>> = vstars
         .par_iter()
         .map(|&v| {
@@ -486,7 +499,9 @@ pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq) -> usize {
                 p = add(c, cp.map(|x| x * rc / norm(cp)));
                 changed = true;
             }
-            changed.then_some(p)
+            // A v* deeper than `max_move` in the balls is not near this surface (a point of a
+            // thin part meshed on the wrong side): pushing it out could take it anywhere.
+            (changed && norm(sub(p, v)) <= max_move).then_some(p)
         })
         .collect();
     let mut count = 0;
@@ -498,6 +513,32 @@ pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq) -> usize {
     }
     ponq.vstars = Some(vstars);
     count
+}
+
+/// Faces of `mesh` that cross space a node's ball shows empty: their centroid lies more than
+/// `depth` cells inside the open ball of one of the 8 nodes around it (a triangle bridging a
+/// gap, a spike out of a thin part). A mesh of the true surface has none.
+pub fn intrusions(grid: &DistanceGrid, mesh: &TriMesh, depth: f64) -> usize {
+    let h = grid.h;
+    let depth = depth * h;
+    mesh.faces
+        .par_iter()
+        .filter(|f| {
+            let [a, b, c] = f.map(|v| mesh.vertices[v as usize]);
+            let p: [f64; 3] = std::array::from_fn(|k| (a[k] + b[k] + c[k]) / 3.0);
+            let base: [isize; 3] =
+                std::array::from_fn(|k| ((p[k] - grid.lo[k]) / h).floor() as isize);
+            (0..8).any(|corner| {
+                let n: [isize; 3] = std::array::from_fn(|k| base[k] + ((corner >> k) & 1));
+                if (0..3).any(|k| n[k] < 0 || n[k] >= grid.dims[k] as isize) {
+                    return false;
+                }
+                let [i, j, k] = n.map(|x| x as usize);
+                let r = grid.values[grid.index(i, j, k)].abs();
+                r - norm(sub(p, grid.node(i, j, k))) > depth
+            })
+        })
+        .count()
 }
 
 /// Calls `f(centre, radius)` for the balls of the nodes within [`REACH`] nodes of `at`
@@ -536,8 +577,8 @@ pub struct RefitStats {
 /// one flag per point, `None` for all; the points of cells that will be merged into one need
 /// no sharing: their cell already gathers the samples of all its points); a point with at
 /// least `min_samples` samples gets the weighted mean of their plane quadrics, scaled to the
-/// trace of its own quadric's `A` (and mixed with it by `prior`), and its v* solved again;
-/// the others are unchanged. Points, and normals unless `opts.normals`, are kept.
+/// trace of its own quadric's `A` (and mixed with it by `prior`), and its v* solved again
+/// within `max_move` cells of its point; the others are unchanged. Points, and normals unless `opts.normals`, are kept.
 ///
 /// # Errors
 /// [`DataError::Invalid`] for a non-positive `h` or a `sharing` of the wrong length; errors
@@ -573,13 +614,34 @@ pub fn refit(
     let mut nsum = vec![[0.0f64; 3]; m];
     let mut count = vec![0usize; m];
     let mut weight = vec![0.0f64; m];
+    // A sample only counts for a point on its side of the surface: on a part thinner than
+    // the sharing radius, samples of the other side (opposite normals) would pull the point's
+    // v* to the middle and the part would vanish. Normals of the two faces of an edge make up
+    // to about 90 degrees; only those beyond `max_angle` are the other side.
+    let unit: Vec<[f64; 3]> = ponq
+        .normals
+        .iter()
+        .map(|n| {
+            let l = norm(*n);
+            if l > 0.0 { n.map(|c| c / l) } else { [0.0; 3] }
+        })
+        .collect();
+    let min_cos = opts.max_angle.to_radians().cos();
+    let same_side = |i: usize, s: usize| {
+        let (a, b) = (unit[i], samples.normals[s]);
+        a == [0.0; 3] || a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= min_cos
+    };
     let mut add = |i: usize, s: usize, w: f64| {
+        if !same_side(i, s) {
+            return false;
+        }
         quad[i] += Quadric::from_plane(samples.points[s], samples.normals[s]) * w;
         for a in 0..3 {
             nsum[i][a] += w * samples.normals[s][a];
         }
         count[i] += 1;
         weight[i] += w;
+        true
     };
     if opts.share > 0.0 {
         let share2 = (opts.share * h).powi(2);
@@ -595,13 +657,11 @@ pub fn refit(
                 && !shares(i0 as usize)
                 && d0 <= r2
             {
-                add(i0 as usize, s, 1.0);
-                any = true;
+                any |= add(i0 as usize, s, 1.0);
             }
             for &(i, d2) in list {
                 if shares(i as usize) && d2 <= share2 {
-                    add(i as usize, s, (-d2 / sigma2).exp());
-                    any = true;
+                    any |= add(i as usize, s, (-d2 / sigma2).exp());
                 }
             }
             stats.assigned += usize::from(any);
@@ -609,8 +669,7 @@ pub fn refit(
     } else {
         let nearest = index.nearest_many(&samples.points);
         for (s, &(i, d2)) in nearest.iter().enumerate() {
-            if d2 <= r2 {
-                add(i as usize, s, 1.0);
+            if d2 <= r2 && add(i as usize, s, 1.0) {
                 stats.assigned += 1;
             }
         }
@@ -635,10 +694,17 @@ pub fn refit(
             } else {
                 ponq.points[i]
             };
-            let v = q.optimal_point(reference, opts.cutoff);
-            if v.iter().any(|c| !c.is_finite()) {
-                return None;
-            }
+            // A v* stays within `max_move` of its point (the network's are within a few
+            // hundredths of a cell): where the samples' planes meet farther away (nearly
+            // parallel planes at a thin tip), fewer of their directions are kept, down to the
+            // main plane alone; failing that the point keeps the network's values.
+            let max_move = opts.max_move * h;
+            let v = [opts.cutoff, 0.2, 1.0]
+                .into_iter()
+                .map(|c| q.optimal_point(reference, c))
+                .find(|v| {
+                    v.iter().all(|c| c.is_finite()) && norm(sub(*v, reference)) <= max_move
+                })?;
             let mut n = ponq.normals[i];
             if opts.normals {
                 let l = norm(nsum[i]);
@@ -686,7 +752,7 @@ pub struct Refinement {
 /// `opts.rounds` times take samples along the current mesh's directions, refit `ponq`
 /// (always the original, so errors do not compound; `sharing` as in [`refit`]) and mesh it
 /// with `mesh_fn`; a round's mesh is kept only if it fits the distances better than the best
-/// so far.
+/// so far and has no more faces through empty space ([`intrusions`]) than `mesh`.
 ///
 /// # Errors
 /// Errors of [`grid_samples`], [`refit`] and `mesh_fn`.
@@ -709,6 +775,9 @@ pub fn refine(
     let mut current = mesh.clone();
     let mut current_ponq: Option<Ponq> = None;
     let mut best = f64::INFINITY;
+    // A round may not add faces through empty space (see [`intrusions`]); the fit of a few
+    // such faces barely changes.
+    let allowed = intrusions(grid, mesh, INTRUSION_DEPTH);
     let cells = grid.dims.iter().max().map_or(1, |&d| d - 1);
     let rounds = opts
         .rounds
@@ -718,9 +787,10 @@ pub fn refine(
         if round == rounds {
             // The last mesh only needs its fit.
             let r = fit_residual(grid, &current, opts)?;
+            let clean = round == 0 || intrusions(grid, &current, INTRUSION_DEPTH) <= allowed;
             spent += t.elapsed();
             out.residuals.push(r);
-            if r < best {
+            if r < best && clean {
                 out.mesh = current.clone();
                 out.ponq = current_ponq.clone();
                 out.rounds_kept = round;
@@ -730,7 +800,8 @@ pub fn refine(
         let s = grid_samples(grid, &current, opts)?;
         spent += t.elapsed();
         out.residuals.push(s.residual);
-        if s.residual < best {
+        let clean = round == 0 || intrusions(grid, &current, INTRUSION_DEPTH) <= allowed;
+        if s.residual < best && clean {
             best = s.residual;
             out.mesh = current.clone();
             out.ponq = current_ponq.clone();

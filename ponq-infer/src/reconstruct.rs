@@ -401,7 +401,7 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
             let (mut q, _) = convert(raw, &p.cells, frame.n, opts)
                 .map_err(|e| ponq_data::DataError::Invalid(format!("{e:#}")))?;
             if ro.clear {
-                clear_balls(&grid, &mut q);
+                clear_balls(&grid, &mut q, ro.max_move);
             }
             let out = mesh_ponq(&q, &mopts)?;
             rounds.push((q, out.stats));

@@ -1,0 +1,136 @@
+"""Type stubs of the `ponq` extension module (PoNQ-rs for Python).
+
+The docstrings of the functions themselves (``help(ponq.infer)``) describe every argument.
+"""
+
+import os
+from typing import Any, Dict, Literal, Optional, Sequence, Tuple, Union, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+DEFAULT_MERGE_SMOOTH: float
+
+Float64Array = npt.NDArray[np.float64]
+Float32Array = npt.NDArray[np.float32]
+Int64Array = npt.NDArray[np.int64]
+Mesh = Tuple[Float64Array, Int64Array]
+PoNQDict = Dict[str, Float64Array]
+Bounds = Optional[Sequence[float]]
+OpenArg = Union[None, bool, float]
+
+@overload
+def infer(
+    sdf: npt.ArrayLike,
+    *,
+    bounds: Bounds = None,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    open: OpenArg = None,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    return_ponq: Literal[False] = False,
+    check: bool = True,
+) -> Mesh: ...
+@overload
+def infer(
+    sdf: npt.ArrayLike,
+    *,
+    bounds: Bounds = None,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    open: OpenArg = None,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    return_ponq: Literal[True],
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, PoNQDict]: ...
+def mesh(
+    points: npt.ArrayLike,
+    normals: npt.ArrayLike,
+    quadrics: npt.ArrayLike,
+    *,
+    vstars: Optional[npt.ArrayLike] = None,
+    grid_scale: float,
+    bounds: Bounds = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = None,
+    open: OpenArg = None,
+    crease_flips: bool = True,
+    threads: Optional[int] = None,
+    check: bool = True,
+) -> Mesh: ...
+@overload
+def sdf(
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    res: int,
+    *,
+    normalize: bool = True,
+    return_transform: Literal[False] = False,
+    threads: Optional[int] = None,
+) -> Float32Array: ...
+@overload
+def sdf(
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    res: int,
+    *,
+    normalize: bool = True,
+    return_transform: Literal[True],
+    threads: Optional[int] = None,
+) -> Tuple[Float32Array, Float64Array, float]: ...
+def sample(
+    vertices: npt.ArrayLike, faces: npt.ArrayLike, n: int, *, seed: int = 0
+) -> Tuple[Float64Array, Float64Array]: ...
+@overload
+def fit(
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    *,
+    grid: int = 32,
+    iterations: int = 400,
+    samples: Optional[int] = None,
+    seed: int = 0,
+    lite: bool = False,
+    open: OpenArg = None,
+    normalized: bool = False,
+    return_ponq: Literal[False] = False,
+    threads: Optional[int] = None,
+    check: bool = True,
+) -> Mesh: ...
+@overload
+def fit(
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    *,
+    grid: int = 32,
+    iterations: int = 400,
+    samples: Optional[int] = None,
+    seed: int = 0,
+    lite: bool = False,
+    open: OpenArg = None,
+    normalized: bool = False,
+    return_ponq: Literal[True],
+    threads: Optional[int] = None,
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, PoNQDict]: ...
+def metrics(
+    pred_v: npt.ArrayLike,
+    pred_f: npt.ArrayLike,
+    gt_v: npt.ArrayLike,
+    gt_f: npt.ArrayLike,
+    *,
+    samples: int = 100000,
+    seed: int = 0,
+    sharp_angle: float = 30.0,
+    threads: Optional[int] = None,
+) -> Dict[str, Any]: ...
+def check(vertices: npt.ArrayLike, faces: npt.ArrayLike) -> Dict[str, Any]: ...
+def marching_cubes(sdf: npt.ArrayLike, *, bounds: Bounds = None) -> Mesh: ...

@@ -1,0 +1,418 @@
+"""Tests of the `ponq` Python module against the PoNQ-rs programs and brute force.
+
+Run from the repository root or from ponq-py/ after installing the package:
+
+    python3 -m venv /tmp/ponqvenv
+    CARGO_TARGET_DIR=$PWD/target /tmp/ponqvenv/bin/pip install ./ponq-py pytest
+    /tmp/ponqvenv/bin/python -m pytest ponq-py/tests
+
+The comparisons with the programs need their release builds (`cargo build --release --bins`);
+they are skipped, with a message, when the binaries are missing.
+"""
+
+import json
+import os
+import subprocess
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ponq
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+BIN = Path(os.environ.get("PONQ_BIN_DIR", ROOT / "target" / "release"))
+
+
+def binary(name):
+    p = BIN / name
+    if not p.is_file():
+        pytest.skip(f"{p} is missing: build the programs first (cargo build --release --bins)")
+    return p
+
+
+def run(args):
+    r = subprocess.run([str(a) for a in args], capture_output=True, text=True)
+    assert r.returncode == 0, f"{args} failed ({r.returncode}): {r.stderr}"
+    return r.stdout
+
+
+def read_obj(path):
+    """Vertices and triangles of an OBJ file (`v x y z` and `f a b c` lines, 1-based)."""
+    v, f = [], []
+    with open(path) as fh:
+        for line in fh:
+            t = line.split()
+            if not t:
+                continue
+            if t[0] == "v":
+                v.append([float(x) for x in t[1:4]])
+            elif t[0] == "f":
+                idx = [int(x.split("/")[0]) - 1 for x in t[1:]]
+                for k in range(1, len(idx) - 1):
+                    f.append([idx[0], idx[k], idx[k + 1]])
+    return np.array(v, dtype=np.float64).reshape(-1, 3), np.array(f, dtype=np.int64).reshape(-1, 3)
+
+
+def write_obj(path, v, f):
+    """An OBJ that reads back exactly (`repr` of a float is its shortest round trip)."""
+    with open(path, "w") as fh:
+        for p in v:
+            fh.write(f"v {float(p[0])!r} {float(p[1])!r} {float(p[2])!r}\n")
+        for t in f:
+            fh.write(f"f {t[0] + 1} {t[1] + 1} {t[2] + 1}\n")
+
+
+def assert_valid(v, f):
+    r = ponq.check(v, f)
+    assert r["valid"], r["summary"]
+    assert len(f) > 0
+
+
+def box_sdf(n=17, half=0.6):
+    g = np.linspace(-1.0, 1.0, n)
+    x, y, z = np.meshgrid(g, g, g, indexing="ij")
+    return np.maximum(np.abs(x), np.maximum(np.abs(y), np.abs(z))) - half
+
+
+# ------------------------------------------------------------------------------------------
+# infer
+
+
+@pytest.fixture(scope="module")
+def cli_infer(tmp_path_factory):
+    """`ponq-infer` on each shipped grid: its mesh and its saved PoNQ."""
+    exe = binary("ponq-infer")
+    out = {}
+    d = tmp_path_factory.mktemp("infer")
+    for name in ["csg_sdf_33", "example001_sdf_65"]:
+        obj, npz = d / f"{name}.obj", d / f"{name}.npz"
+        run([exe, EXAMPLES / f"{name}.npy", "-o", obj, "--save-ponq", npz, "-q"])
+        out[name] = (read_obj(obj), dict(np.load(npz)))
+    return out
+
+
+@pytest.mark.parametrize("name", ["csg_sdf_33", "example001_sdf_65"])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_infer_equals_the_program(cli_infer, name, dtype, order):
+    (cv, cf), _ = cli_infer[name]
+    g = np.load(EXAMPLES / f"{name}.npy")
+    g = np.asarray(g, dtype=dtype, order=order)
+    assert g.flags.f_contiguous == (order == "F")
+    v, f = ponq.infer(g)
+    assert v.dtype == np.float64 and f.dtype == np.int64
+    assert v.shape == cv.shape and f.shape == cf.shape
+    np.testing.assert_array_equal(v, cv)
+    np.testing.assert_array_equal(f, cf)
+    assert_valid(v, f)
+
+
+def test_infer_returns_the_saved_ponq(cli_infer):
+    _, saved = cli_infer["csg_sdf_33"]
+    g = np.load(EXAMPLES / "csg_sdf_33.npy")
+    v, f, p = ponq.infer(g, return_ponq=True)
+    m = len(saved["points"])
+    assert p["points"].shape == (m, 3) and p["normals"].shape == (m, 3)
+    assert p["quadrics"].shape == (m, 4, 4) and p["vstars"].shape == (m, 3)
+    for k in ["points", "normals", "quadrics", "vstars"]:
+        if k in saved:
+            np.testing.assert_array_equal(p[k], saved[k], err_msg=k)
+
+
+def test_infer_options_and_threads():
+    g = np.load(EXAMPLES / "csg_sdf_33.npy")
+    v, f = ponq.infer(g)
+    v1, f1 = ponq.infer(g, threads=1)
+    np.testing.assert_array_equal(v, v1)
+    np.testing.assert_array_equal(f, f1)
+    vl, fl = ponq.infer(g, lite=True)
+    assert_valid(vl, fl)
+    assert len(vl) < len(v)
+    vo, fo = ponq.infer(g, refine="off", merge_smooth=None)
+    assert_valid(vo, fo)
+
+
+def test_infer_from_threads():
+    """Calls release the GIL: two threads at once give the single call's mesh."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    g = np.load(EXAMPLES / "csg_sdf_33.npy")
+    v, f = ponq.infer(g)
+    with ThreadPoolExecutor(2) as ex:
+        outs = list(ex.map(lambda t: ponq.infer(g, threads=t), [1, 2]))
+    for ov, of in outs:
+        np.testing.assert_array_equal(ov, v)
+        np.testing.assert_array_equal(of, f)
+
+
+def test_infer_bounds_scale_the_output():
+    g = np.load(EXAMPLES / "csg_sdf_33.npy").astype(np.float64)
+    v, f = ponq.infer(g, refine="off")
+    # The same shape twice as large and moved: distances scale with the box.
+    vb, fb = ponq.infer(2.0 * g, bounds=[1, 1, 1, 5, 5, 5], refine="off")
+    np.testing.assert_array_equal(f, fb)
+    np.testing.assert_allclose(vb, 2.0 * v + 3.0, rtol=0, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# mesh
+
+
+def test_mesh_equals_the_program(tmp_path):
+    exe = binary("ponq-mesh")
+    npz = EXAMPLES / "csg_ponq_32.npz"
+    d = np.load(npz)
+    for extra, kw in [([], {}), (["--lite"], {"lite": True}), (["--merge-smooth", "15"], {"merge_smooth": 15.0})]:
+        obj = tmp_path / "m.obj"
+        run([exe, npz, "-o", obj, "--grid-scale", "32", "-q", *extra])
+        cv, cf = read_obj(obj)
+        v, f = ponq.mesh(d["points"], d["normals"], d["quadrics"], grid_scale=32, **kw)
+        np.testing.assert_array_equal(v, cv)
+        np.testing.assert_array_equal(f, cf)
+        assert_valid(v, f)
+
+
+def test_mesh_takes_float32_and_fortran():
+    d = np.load(EXAMPLES / "csg_ponq_32.npz")
+    args = [np.asfortranarray(d[k].astype(np.float32)) for k in ["points", "normals", "quadrics"]]
+    v, f = ponq.mesh(*args, grid_scale=32)
+    ref = ponq.mesh(*[a.astype(np.float64) for a in args], grid_scale=32)
+    np.testing.assert_array_equal(v, ref[0])
+    np.testing.assert_array_equal(f, ref[1])
+
+
+# ------------------------------------------------------------------------------------------
+# sdf, sample
+
+
+def point_triangle_distance(p, a, b, c):
+    """Distances from points p (N, 3) to the triangle abc: the plane inside it, else the
+    nearest of its three edges."""
+    n = np.cross(b - a, c - a)
+    n = n / np.linalg.norm(n)
+    q = p - np.outer((p - a) @ n, n)  # projections onto the plane
+    inside = np.ones(len(p), bool)
+    for u, w in [(a, b), (b, c), (c, a)]:
+        inside &= np.cross(w - u, q - u) @ n >= 0
+    d_plane = np.abs((p - a) @ n)
+
+    def seg(u, w):
+        t = np.clip(((p - u) @ (w - u)) / ((w - u) @ (w - u)), 0, 1)
+        return np.linalg.norm(p - (u + np.outer(t, w - u)), axis=1)
+
+    d_edge = np.minimum(seg(a, b), np.minimum(seg(b, c), seg(c, a)))
+    return np.where(inside, d_plane, d_edge)
+
+
+def cube_mesh(h=0.55):
+    v = np.array([[x, y, z] for x in (-h, h) for y in (-h, h) for z in (-h, h)], dtype=np.float64)
+    # Outward-oriented quads split in two.
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    f = []
+    for a, b, c, d in quads:
+        f += [[a, b, c], [a, c, d]]
+    return v, np.array(f, dtype=np.int64)
+
+
+def test_sdf_against_brute_force():
+    v, f = cube_mesh(0.55)
+    assert ponq.check(v, f)["valid"]
+    res = 8
+    g = ponq.sdf(v, f, res, normalize=False)
+    assert g.dtype == np.float32 and g.shape == (res + 1,) * 3
+    c = -1 + 2 * np.arange(res + 1) / res
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    pts = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    d = np.min([point_triangle_distance(pts, *v[t]) for t in f], axis=0)
+    inside = np.all(np.abs(pts) < 0.55, axis=1)
+    expected = np.where(inside, -d, d).reshape(g.shape)
+    np.testing.assert_allclose(g, expected, rtol=1e-6, atol=1e-7)
+    assert (g < 0).sum() == inside.sum()
+    # Normalised: centre 0 (already), scale 2 / diagonal.
+    g2, centre, scale = ponq.sdf(v, f, res, return_transform=True)
+    np.testing.assert_allclose(centre, 0, atol=0)
+    assert scale == pytest.approx(2 / np.linalg.norm([1.1, 1.1, 1.1]))
+    assert g2.min() < 0 < g2.max()
+
+
+def test_sdf_equals_ponq_prep(tmp_path):
+    exe = binary("ponq-prep")
+    out = tmp_path / "csg.npy"
+    run([exe, "sdf", EXAMPLES / "csg.obj", "-o", out, "--res", "32", "-q"])
+    v, f = read_obj(EXAMPLES / "csg.obj")
+    g = ponq.sdf(v, f, 32)
+    ref = np.load(out)
+    assert g.dtype == ref.dtype == np.float32
+    np.testing.assert_array_equal(g, ref)
+    # And the shipped grid was made the same way.
+    np.testing.assert_array_equal(g, np.load(EXAMPLES / "csg_sdf_33.npy"))
+
+
+def test_sdf_then_infer_maps_back():
+    v, f = read_obj(EXAMPLES / "csg.obj")
+    g, centre, scale = ponq.sdf(v, f.astype(np.int32), 32, return_transform=True)
+    mv, mf = ponq.infer(g)
+    mv = mv / scale + centre
+    lo, hi = v.min(0), v.max(0)
+    assert np.all(mv.min(0) > lo - 0.05 * (hi - lo)) and np.all(mv.max(0) < hi + 0.05 * (hi - lo))
+
+
+def test_sample():
+    v, f = cube_mesh(0.5)
+    p, n = ponq.sample(v, f, 1000, seed=3)
+    assert p.shape == n.shape == (1000, 3)
+    np.testing.assert_allclose(np.abs(p).max(axis=1), 0.5, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-12)
+    p2, _ = ponq.sample(v, f, 1000, seed=3)
+    np.testing.assert_array_equal(p, p2)
+
+
+# ------------------------------------------------------------------------------------------
+# fit, metrics, check, marching cubes
+
+
+def test_fit_is_valid_and_in_the_input_frame():
+    v, f = read_obj(EXAMPLES / "csg.obj")
+    mv, mf, p = ponq.fit(v, f, grid=16, iterations=60, samples=20000, return_ponq=True)
+    assert_valid(mv, mf)
+    lo, hi = v.min(0), v.max(0)
+    assert np.all(mv.min(0) > lo - 0.1 * (hi - lo)) and np.all(mv.max(0) < hi + 0.1 * (hi - lo))
+    nv, nf = ponq.fit(v, f, grid=16, iterations=60, samples=20000, normalized=True)
+    np.testing.assert_array_equal(nf, mf)
+    assert np.abs(nv).max() <= 1.1
+    # The returned PoNQ meshes again to the normalised mesh.
+    rv, rf = ponq.mesh(p["points"], p["normals"], p["quadrics"], vstars=p["vstars"], grid_scale=16)
+    assert_valid(rv, rf)
+
+
+def test_metrics_equal_the_program(tmp_path):
+    exe = binary("ponq-eval")
+    gv, gf = read_obj(EXAMPLES / "csg.obj")
+    mv, mf = ponq.marching_cubes(np.load(EXAMPLES / "csg_sdf_33.npy"))
+    # Into the ground truth's coordinates (the grid frame: bounding-box centre 0, diagonal 2).
+    lo, hi = gv.min(0), gv.max(0)
+    mv = mv * (np.linalg.norm(hi - lo) / 2) + (lo + hi) / 2
+    pred = tmp_path / "mc.obj"
+    write_obj(pred, mv, mf)
+    out = run([exe, "compare", pred, EXAMPLES / "csg.obj", "--pred-frame", "gt", "--json",
+               "--samples", "20000", "--seed", "1"])
+    ref = json.loads(out)
+    m = ponq.metrics(mv, mf, gv, gf, samples=20000, seed=1)
+    for k in ["cd_x1e5", "f1", "nc", "ecd_x1e2", "ef1", "watertight", "vertices", "faces"]:
+        assert m[k] == ref[k], k
+    # Marching cubes at 33^3 is coarse: a low F1 at 0.003, a small Chamfer distance.
+    assert 0.2 < m["f1"] < 1 and m["cd_x1e5"] < 100 and m["watertight"]
+
+
+def test_marching_cubes_and_check():
+    v, f = ponq.marching_cubes(box_sdf())
+    r = ponq.check(v, f)
+    assert r["valid"] and r["closed"] and not r["self_intersecting"]
+    r = ponq.check(v, f[:-1])
+    assert not r["valid"] and not r["closed"] and r["boundary_edges"] == 3
+    assert ponq.check(np.zeros((0, 3)), [])["valid"]
+
+
+# ------------------------------------------------------------------------------------------
+# bad input
+
+
+def test_bad_grids():
+    g = box_sdf()
+    nan = g.copy()
+    nan[3, 4, 5] = np.nan
+    with pytest.raises(ValueError, match=r"grid value at \[3, 4, 5\] is NaN"):
+        ponq.infer(nan)
+    with pytest.raises(ValueError, match=r"expected a 3D grid \(rank 3\), found an array of shape \(17, 17\)"):
+        ponq.infer(g[0])
+    with pytest.raises(ValueError, match="at least 2 nodes along every axis"):
+        ponq.infer(np.full((1, 5, 5), -1.0))
+    with pytest.raises(ValueError, match="no sign change"):
+        ponq.infer(np.abs(g) + 0.1)
+    with pytest.raises(ValueError, match="cells are not cubes"):
+        ponq.infer(g, bounds=[0, 0, 0, 1, 1, 2])
+    with pytest.raises(ValueError, match="bounds: .*6 comma-separated numbers"):
+        ponq.infer(g, bounds=[0, 0, 0, 1])
+    with pytest.raises(ValueError, match="invalid value 'bogus' for refine"):
+        ponq.infer(g, refine="bogus")
+    with pytest.raises(ValueError, match="merge_smooth takes an angle"):
+        ponq.infer(g, merge_smooth=200)
+    with pytest.raises(ValueError, match="open-surface threshold must be in"):
+        ponq.infer(g, open=2.0)
+    with pytest.raises(ValueError, match="not with lite or coarsen"):
+        ponq.infer(g, lite=True, refine="on")
+    with pytest.raises(ValueError, match="threads must be at least 1"):
+        ponq.infer(g, threads=0)
+    with pytest.raises(ValueError, match="expected an array of real numbers"):
+        ponq.infer(g.astype(np.complex128))
+    with pytest.raises(ValueError, match="weights file"):
+        ponq.infer(g, model="/nonexistent/model.bpk")
+    with pytest.raises(ValueError, match="grid value at"):
+        ponq.marching_cubes(nan)
+
+
+def test_bad_meshes():
+    v, f = cube_mesh()
+    bad = f.copy()
+    bad[4, 1] = 8
+    msg = "face 4 refers to vertex 8 but there are only 8 vertices"
+    for fn in [lambda: ponq.sdf(v, bad, 8), lambda: ponq.check(v, bad), lambda: ponq.sample(v, bad, 10),
+               lambda: ponq.fit(v, bad), lambda: ponq.metrics(v, bad, v, f)]:
+        with pytest.raises(ValueError, match=msg):
+            fn()
+    neg = f.copy()
+    neg[0, 0] = -1
+    with pytest.raises(ValueError, match="refers to vertex -1"):
+        ponq.check(v, neg)
+    with pytest.raises(ValueError, match="expected an array of integers"):
+        ponq.check(v, f.astype(np.float64))
+    with pytest.raises(ValueError, match=r"array 'vertices': expected shape \(V, 3\), found \(8, 2\)"):
+        ponq.check(v[:, :2], f)
+    vn = v.copy()
+    vn[2, 1] = np.inf
+    with pytest.raises(ValueError, match="vertex 2 = .* has a non-finite coordinate"):
+        ponq.sdf(vn, f, 8)
+    with pytest.raises(ValueError, match="res must be in 2..=1024"):
+        ponq.sdf(v, f, 1)
+    with pytest.raises(ValueError, match="the ground truth has no face"):
+        ponq.metrics(v, f, v, np.zeros((0, 3), np.int64))
+    with pytest.raises(ValueError, match="samples must be positive"):
+        ponq.metrics(v, f, v, f, samples=0)
+    with pytest.raises(ValueError, match="grid must be between 2 and 1024"):
+        ponq.fit(v, f, grid=1)
+
+
+def test_bad_ponq():
+    d = np.load(EXAMPLES / "csg_ponq_32.npz")
+    p, n, q = d["points"], d["normals"], d["quadrics"]
+    with pytest.raises(ValueError, match=r"array 'normals': expected shape \(M, 3\)"):
+        ponq.mesh(p, n[:, :2], q, grid_scale=32)
+    with pytest.raises(ValueError, match="disagree on the number of points M"):
+        ponq.mesh(p, n[:-1], q, grid_scale=32)
+    pn = p.copy()
+    pn[7, 0] = np.nan
+    with pytest.raises(ValueError, match=r"points\[7\] = .* is not finite"):
+        ponq.mesh(pn, n, q, grid_scale=32)
+    with pytest.raises(ValueError, match="grid_scale must be >= 1"):
+        ponq.mesh(p, n, q, grid_scale=0.5)
+    with pytest.raises(ValueError, match="coarsen needs lite=True"):
+        ponq.mesh(p, n, q, grid_scale=32, coarsen=1)
+    with pytest.raises(ValueError, match="merge_smooth and lite exclude each other"):
+        ponq.mesh(p, n, q, grid_scale=32, lite=True, merge_smooth=10)
+    with pytest.raises(TypeError):
+        ponq.mesh(p, n, q)  # grid_scale is required
+
+
+def test_docstrings():
+    assert ponq.__version__ and ponq.DEFAULT_MERGE_SMOOTH == 15.0
+    assert "ponq.infer" in ponq.__doc__
+    for name in ["infer", "mesh", "sdf", "sample", "fit", "metrics", "check", "marching_cubes"]:
+        fn = getattr(ponq, name)
+        assert fn.__doc__ and ("Args:" in fn.__doc__ or "Returns:" in fn.__doc__), name
+        assert fn.__text_signature__.startswith("(")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ponq.check(*cube_mesh())

@@ -563,6 +563,9 @@ fn for_each_neighbour(grid: &DistanceGrid, at: [usize; 3], mut f: impl FnMut([f6
     }
 }
 
+/// One refitted point: its quadric, v* and normal.
+type Refitted = (Quadric, [f64; 3], [f64; 3]);
+
 /// What [`refit`] changed.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct RefitStats {
@@ -675,7 +678,7 @@ pub fn refit(
         }
     }
     // Per point: the refitted (quadric, v*, normal), or None to keep the network's.
-    let refitted: Vec<Option<(Quadric, [f64; 3], [f64; 3])>> = (0..m)
+    let refitted: Vec<Option<Refitted>> = (0..m)
         .into_par_iter()
         .map(|i| {
             if count[i] < opts.min_samples.max(1) {

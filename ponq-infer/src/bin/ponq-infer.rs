@@ -211,7 +211,10 @@ fn run(args: &Args) -> Result<Outcome> {
         bail!("--res and --normalized are for a mesh input (.obj, .ply, .off, .stl)");
     }
     if !args.input.exists() {
-        bail!("cannot read the input {}: it does not exist", args.input.display());
+        bail!(
+            "cannot read the input {}: it does not exist",
+            args.input.display()
+        );
     }
     let dev = device(args.backend).map_err(anyhow::Error::msg)?;
     let t = Instant::now();

@@ -29,7 +29,7 @@ else
 fi
 # Documentation and code speak of the project, not of the rounds of work that wrote it.
 if git grep -il "sess""ion" -- . ':!Cargo.lock'; then
-  echo "the files above mention work sessions" >&2
+  echo "the files above speak of how the work was organised" >&2
   exit 1
 fi
 echo "all checks passed"

@@ -35,7 +35,7 @@ struct Args {
     #[arg(short, long)]
     output: PathBuf,
     /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
-    /// (the network's training resolution), 64 a good default, 128 fine.
+    /// (the network's training resolution), 128 fine [default: 64].
     #[arg(long, value_name = "RES")]
     res: Option<usize>,
     /// Mesh input only: write the output in the normalised [-1,1] frame of the grid (as
@@ -46,7 +46,7 @@ struct Args {
     /// surface gives a surface sample along the first mesh's directions; the quadrics are
     /// refitted to them and the PoNQ meshed again, a few rounds, a round kept only if its
     /// mesh fits the distances better). `auto` refines when the grid passes a check of a true
-    /// signed distance (gradient of length 1, 1-Lipschitz near the surface), so that scaled,
+    /// signed distance (near the surface it falls at rate 1 and never faster), so that scaled,
     /// smoothed or approximate fields are left as the network reads them; `on` always; `off`
     /// never. Not with --open, --lite or --coarsen.
     #[arg(long, value_name = "MODE", default_value = "auto")]

@@ -1,4 +1,5 @@
-//! `ponq-eval run` on a tiny split against direct metric calls; how its inputs are found;
+//! `ponq-eval run` on a tiny split against direct metric calls, with the refined rows; how its
+//! inputs are found;
 //! `ponq-eval compare`'s sharp-edge angle.
 
 use std::path::PathBuf;
@@ -293,4 +294,53 @@ fn compare_sharp_angle_sets_the_edges_that_count() {
         assert!(String::from_utf8_lossy(&o.stderr).contains("--sharp-angle"));
     }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn eval_run_reports_refined_rows_beside_the_network() {
+    let d = tmp("refine");
+    let data = d.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    std::fs::copy(root.join("examples/csg.obj"), data.join("csg.obj")).unwrap();
+    let report = d.join("report");
+    let o = Command::new(env!("CARGO_BIN_EXE_ponq-eval"))
+        .args([
+            "run",
+            "--res",
+            "24",
+            "--samples",
+            "20000",
+            "--renders",
+            "0",
+            "--refine",
+            "-q",
+            "--data",
+        ])
+        .arg(&data)
+        .arg("-o")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(report.join("per_shape.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let row = |method: &str| -> Vec<String> {
+        csv.lines()
+            .map(|l| l.split(',').map(String::from).collect::<Vec<_>>())
+            .find(|r| r[col("method")] == method)
+            .unwrap_or_else(|| panic!("no {method} row in {csv}"))
+    };
+    let (net, refined) = (row("PoNQ"), row("PoNQ+refine"));
+    let _ = row("MC");
+    let num = |r: &[String], c: &str| r[col(c)].parse::<f64>().unwrap();
+    // The exact grid of a CAD part: the refined mesh is valid, closer to the part and its
+    // edges sharper; its time includes the network's run, which both rows share.
+    assert_eq!(refined[col("watertight")], "true");
+    assert!(num(&refined, "cd_x1e5") < num(&net, "cd_x1e5"), "{csv}");
+    assert!(num(&refined, "ef1") > num(&net, "ef1"), "{csv}");
+    assert!(num(&refined, "seconds") > 0.0 && num(&net, "seconds") > 0.0);
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    assert!(summary.contains("| PoNQ+refine |"), "{summary}");
 }

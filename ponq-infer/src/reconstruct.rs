@@ -364,26 +364,33 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
     let mut ponq = ponq;
     // Refinement against the grid's distances.
     let t3 = Instant::now();
-    let grid = DistanceGrid::new(
-        frame.cells.map(|c| c + 1),
-        [-1.0; 3],
-        2.0 / frame.n as f64,
-        &p.normalised,
-    )?;
     let mut refinement = RefineReport {
         mode: opts.refine,
         ..Default::default()
     };
-    let wanted = match opts.refine {
-        RefineMode::Off => false,
-        RefineMode::On => true,
-        RefineMode::Auto => {
-            let c = check_distance(&grid);
+    // The grid's distances in the normalised frame; not needed when refinement is off.
+    let grid = match opts.refine {
+        RefineMode::Off => None,
+        _ => Some(DistanceGrid::new(
+            frame.cells.map(|c| c + 1),
+            [-1.0; 3],
+            2.0 / frame.n as f64,
+            &p.normalised,
+        )?),
+    };
+    let wanted = match (&grid, opts.refine) {
+        (Some(g), RefineMode::Auto) => {
+            let c = check_distance(g);
             refinement.check = Some(c);
             c.is_distance()
         }
+        (Some(_), _) => true,
+        (None, _) => false,
     };
-    if wanted && !mesh.faces.is_empty() && opts.open.is_none() {
+    if let Some(grid) = grid.as_ref().filter(|_| wanted)
+        && !mesh.faces.is_empty()
+        && opts.open.is_none()
+    {
         // Every round's merged PoNQ and meshing statistics, to report the kept one's.
         let mut rounds: Vec<(Ponq, MeshingStats)> = Vec::new();
         // Points of cells merged into one need no shared samples (see `refit`).
@@ -397,11 +404,11 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
             None => None,
         };
         let ro = &opts.refine_options;
-        let r = refine(&p.ponq, &mesh, &grid, ro, sharing.as_deref(), |raw| {
+        let r = refine(&p.ponq, &mesh, grid, ro, sharing.as_deref(), |raw| {
             let (mut q, _) = convert(raw, &p.cells, frame.n, opts)
                 .map_err(|e| ponq_data::DataError::Invalid(format!("{e:#}")))?;
             if ro.clear {
-                clear_balls(&grid, &mut q, ro.max_move);
+                clear_balls(grid, &mut q, ro.max_move);
             }
             let out = mesh_ponq(&q, &mopts)?;
             rounds.push((q, out.stats));

@@ -31,6 +31,37 @@ pub fn cell_of(p: [f64; 3], n: usize, domain: ([f64; 3], [f64; 3])) -> [u32; 3] 
     })
 }
 
+/// PoNQ-lite (with `coarsen` more levels) when `lite`, else adaptive PoNQ-lite at
+/// `merge_smooth` degrees when given, else the PoNQ unchanged, for a PoNQ whose points' grid
+/// cells are not known: each point's cell is the one its position falls in (a grid of
+/// `grid_scale` cells per side over `domain`, [`cell_of`]). Returns the PoNQ and the grid scale
+/// to mesh it with (divided by `2^coarsen` for the hierarchy). What `ponq-mesh` does with an
+/// `.npz`.
+///
+/// # Errors
+/// As [`coarsen`] and [`merge_smooth_cells`].
+pub fn simplify_by_position(
+    ponq: &Ponq,
+    grid_scale: f64,
+    domain: ([f64; 3], [f64; 3]),
+    lite: bool,
+    coarsen_levels: u32,
+    merge_smooth: Option<f64>,
+) -> Result<(Ponq, f64)> {
+    let cells = || -> Vec<[u32; 3]> {
+        let n = grid_scale.round() as usize;
+        ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect()
+    };
+    if lite {
+        let out = coarsen(ponq, &cells(), coarsen_levels)?;
+        Ok((out, grid_scale / f64::from(1u32 << coarsen_levels.min(20))))
+    } else if let Some(angle) = merge_smooth {
+        Ok((merge_smooth_cells(ponq, &cells(), angle)?, grid_scale))
+    } else {
+        Ok((ponq.clone(), grid_scale))
+    }
+}
+
 /// Merges the points of each group of `2^coarsen` x `2^coarsen` x `2^coarsen` cells
 /// (`coarsen = 0` is PoNQ-lite: one point per cell). `cells[i]` is the grid cell of point `i`.
 /// Quadrics (with their `b` and `c` parts) are summed, normals averaged, and the new v* is the

@@ -15,8 +15,8 @@ use nalgebra::Matrix4;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use ponq_data::normalize::Normalization;
 use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict};
-use ponq_mesh::io::npy::Grid3;
-use ponq_mesh::lite::{cell_of, coarsen as coarsen_cells, merge_smooth_cells};
+use ponq_mesh::io::npy::{Grid3, shape_str};
+use ponq_mesh::lite::simplify_by_position;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::metrics::{MetricOptions, compare};
 use ponq_mesh::validity::{self, ValidityReport};
@@ -168,21 +168,6 @@ fn warn(py: Python<'_>, category: &str, msg: &str) -> PyResult<()> {
 
 // ---------------------------------------------------------------------------------------------
 // Arrays in.
-
-/// Formats a shape like NumPy: `(3,)`, `(2, 3)`.
-fn shape_str(shape: &[usize]) -> String {
-    match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|d| d.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
-}
 
 /// An array-like as C-order values of `dtype` (`"float64"` or `"int64"`) with its shape,
 /// after checking that its dtype kind is one of `kinds` (NumPy's `dtype.kind` letters).
@@ -631,18 +616,8 @@ fn mesh<'py>(
         )));
     }
     let (mesh, report) = run(py, threads, move || {
-        let mut ponq = ponq;
-        let mut grid_scale = grid_scale;
-        if lite {
-            let n = grid_scale.round() as usize;
-            let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
-            ponq = coarsen_cells(&ponq, &cells, coarsen)?;
-            grid_scale /= f64::from(1u32 << coarsen.min(20));
-        } else if let Some(angle) = merge_smooth {
-            let n = grid_scale.round() as usize;
-            let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
-            ponq = merge_smooth_cells(&ponq, &cells, angle)?;
-        }
+        let (ponq, grid_scale) =
+            simplify_by_position(&ponq, grid_scale, domain, lite, coarsen, merge_smooth)?;
         let opts = MeshingOptions {
             grid_scale,
             domain,

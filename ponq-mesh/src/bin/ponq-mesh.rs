@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use ponq_mesh::io;
-use ponq_mesh::lite::{cell_of, coarsen, merge_smooth_cells};
+use ponq_mesh::lite::simplify_by_position;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::validity;
@@ -125,22 +125,20 @@ fn run(args: &Args) -> Result<bool> {
         Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
     };
     let t0 = Instant::now();
-    let mut ponq = io::npz::read_ponq(&args.input).context("reading the PoNQ file")?;
+    let ponq = io::npz::read_ponq(&args.input).context("reading the PoNQ file")?;
     let read_time = t0.elapsed();
-    let mut grid_scale = args.grid_scale;
+    let grid_scale = args.grid_scale;
     if !(grid_scale >= 1.0 && grid_scale.is_finite()) {
         bail!("--grid-scale must be >= 1, got {grid_scale}");
     }
-    if args.lite {
-        let n = grid_scale.round() as usize;
-        let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
-        ponq = coarsen(&ponq, &cells, args.coarsen)?;
-        grid_scale /= f64::from(1u32 << args.coarsen.min(20));
-    } else if let Some(angle) = args.merge_smooth {
-        let n = grid_scale.round() as usize;
-        let cells: Vec<[u32; 3]> = ponq.points.iter().map(|&p| cell_of(p, n, domain)).collect();
-        ponq = merge_smooth_cells(&ponq, &cells, angle)?;
-    }
+    let (ponq, grid_scale) = simplify_by_position(
+        &ponq,
+        grid_scale,
+        domain,
+        args.lite,
+        args.coarsen,
+        args.merge_smooth,
+    )?;
     let opts = MeshingOptions {
         grid_scale,
         domain,

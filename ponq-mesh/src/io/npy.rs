@@ -142,7 +142,7 @@ pub fn write_npy_grid_f32(path: impl AsRef<Path>, grid: &Grid3) -> Result<()> {
 }
 
 /// Formats a shape like NumPy: `(3,)`, `(2, 3)`.
-pub(crate) fn shape_str(shape: &[usize]) -> String {
+pub fn shape_str(shape: &[usize]) -> String {
     match shape {
         [n] => format!("({n},)"),
         _ => format!(

@@ -85,7 +85,7 @@ fn main() -> Result<()> {
             "min_samples" => o.min_samples = f()? as usize,
             "iterations" | "rounds" => o.rounds = Some(f()? as usize),
             "merge" => merge = f()?,
-            "share" => o.share = f()?,
+            "share" => o.share = Some(f()?),
             "cutoff" => o.cutoff = f()?,
             "max_move" => o.max_move = f()?,
             "max_angle" => o.max_angle = f()?,

@@ -36,7 +36,7 @@ use ponq_mesh::{Ponq, Quadric, TriMesh};
 use rayon::prelude::*;
 
 use crate::error::{DataError, Result};
-use crate::sdf::MeshSdf;
+use crate::sdf::{ClosestQueries, MeshSdf};
 
 /// A grid of signed distances, negative inside: node `(i, j, k)` at `lo + h (i, j, k)`,
 /// values in C order (`k` fastest).
@@ -137,8 +137,10 @@ pub struct RefineOptions {
     pub around_vstar: bool,
     /// 0: each sample goes to its nearest point only (Voronoi cells). Otherwise a sample
     /// counts for every sharing point (of its 8 nearest) within this many cells, weighted by
-    /// `exp(-(dist / (share / 2))^2)` (see [`refit`]'s `sharing`).
-    pub share: f64,
+    /// `exp(-(dist / (share / 2))^2)` (see [`refit`]'s `sharing`). `None`:
+    /// [`RefineOptions::share_for`] the grid ([`refit`] alone, which does not see the grid:
+    /// 0.5).
+    pub share: Option<f64>,
     /// Relative singular-value cut-off of the refitted v* solve (the mesher's default is
     /// `ponq_mesh::quadric::SVD_CUTOFF`, 0.05).
     pub cutoff: f64,
@@ -158,6 +160,19 @@ impl RefineOptions {
     pub fn rounds_for(cells: usize) -> usize {
         if cells <= 48 { 2 } else { 1 }
     }
+
+    /// The default sharing radius on a grid of `cells` per side: 0.75 cells from 49 to 96
+    /// cells, 0.5 otherwise. Measured at 33^3, 65^3 and 129^3 (`docs/refinement.md`): at 65^3
+    /// the wider radius finds more edges (CAD EF1 0.797 -> 0.803 on the evaluation meshes,
+    /// 0.884 -> 0.897 on the development set); at 33^3 it merges thin parts' samples (F1
+    /// falls) and at 129^3 it finds fewer edges (EF1 falls on both sets and both groups).
+    pub fn share_for(cells: usize) -> f64 {
+        if (49..=96).contains(&cells) {
+            0.75
+        } else {
+            0.5
+        }
+    }
 }
 
 impl Default for RefineOptions {
@@ -172,7 +187,7 @@ impl Default for RefineOptions {
             min_samples: 1,
             rounds: None,
             around_vstar: false,
-            share: 0.5,
+            share: None,
             cutoff: ponq_mesh::quadric::SVD_CUTOFF,
             clear: true,
             max_move: 1.0,
@@ -312,6 +327,10 @@ pub struct GridSamples {
 /// Depth, in cells, at which a face inside a node's ball counts as an intrusion.
 const INTRUSION_DEPTH: f64 = 0.25;
 
+/// Band nodes per run of closest-point queries (consecutive nodes are neighbours, so each
+/// query starts from its predecessor's triangle).
+const QUERY_CHUNK: usize = 256;
+
 /// Offsets of the neighbour nodes whose balls a sample is tested against.
 const REACH: isize = 2;
 
@@ -337,82 +356,86 @@ pub fn grid_samples(
     let max_shift = opts.max_shift * h;
     type Out = (Option<([f64; 3], [f64; 3])>, f64);
     let out: Vec<Out> = nodes
-        .par_iter()
-        .map(|&f| {
-            let [i, j, k] = grid.coords(f);
-            let x = grid.node(i, j, k);
-            let d = grid.values[f];
-            let r = d.abs();
-            let (y, nf) = sdf.closest_point_and_normal(x);
-            let yx = sub(y, x);
-            let dist = norm(yx);
-            let res = (dist - r) / h;
-            let sign = if d < 0.0 { -1.0 } else { 1.0 };
-            let u = if dist > 1e-12 * h {
-                yx.map(|c| c / dist)
-            } else if norm(nf) > 0.0 {
-                nf.map(|c| -sign * c)
-            } else {
-                return (None, res);
-            };
-            let s0 = add(x, u.map(|c| c * r));
-            let mut s = s0;
-            if r > 0.0 {
-                // The balls that could hold the sample while it moves less than `slack`.
-                let slack = 0.5 * h;
-                let mut balls: Vec<([f64; 3], f64)> = Vec::with_capacity(32);
-                for_each_neighbour(grid, [i, j, k], |c, rc| {
-                    if norm(sub(s0, c)) < rc + slack {
-                        balls.push((c, rc));
-                    }
-                });
-                let deepest = |s: [f64; 3]| {
-                    balls.iter().fold((([0.0; 3], 0.0), 0.0), |best, &(c, rc)| {
-                        let pen = rc - norm(sub(s, c));
-                        if pen > best.1 { ((c, rc), pen) } else { best }
-                    })
-                };
-                // Push the sample out of the neighbours' balls, back onto x's sphere.
-                for _ in 0..4 {
-                    let ((c, rc), pen) = deepest(s);
-                    if pen <= 1e-3 * h {
-                        break;
-                    }
-                    let cs = sub(s, c);
-                    let l = norm(cs);
-                    if l == 0.0 {
-                        break;
-                    }
-                    let pushed = add(c, cs.map(|v| v * rc / l));
-                    let xs = sub(pushed, x);
-                    let lx = norm(xs);
-                    if lx == 0.0 {
-                        break;
-                    }
-                    s = add(x, xs.map(|v| v * r / lx));
-                }
-                let pen = if norm(sub(s, s0)) < slack {
-                    deepest(s).1
+        .par_chunks(QUERY_CHUNK)
+        .flat_map_iter(|chunk| {
+            let sdf = &sdf;
+            let mut queries = ClosestQueries::default();
+            chunk.iter().map(move |&f| {
+                let [i, j, k] = grid.coords(f);
+                let x = grid.node(i, j, k);
+                let d = grid.values[f];
+                let r = d.abs();
+                let (y, nf) = sdf.closest_point_and_normal_with(x, &mut queries);
+                let yx = sub(y, x);
+                let dist = norm(yx);
+                let res = (dist - r) / h;
+                let sign = if d < 0.0 { -1.0 } else { 1.0 };
+                let u = if dist > 1e-12 * h {
+                    yx.map(|c| c / dist)
+                } else if norm(nf) > 0.0 {
+                    nf.map(|c| -sign * c)
                 } else {
-                    let mut worst = 0.0f64;
-                    for_each_neighbour(grid, [i, j, k], |c, rc| {
-                        worst = worst.max(rc - norm(sub(s, c)));
-                    });
-                    worst
+                    return (None, res);
                 };
-                if pen > tol {
+                let s0 = add(x, u.map(|c| c * r));
+                let mut s = s0;
+                if r > 0.0 {
+                    // The balls that could hold the sample while it moves less than `slack`.
+                    let slack = 0.5 * h;
+                    let mut balls: Vec<([f64; 3], f64)> = Vec::with_capacity(32);
+                    for_each_neighbour(grid, [i, j, k], |c, rc| {
+                        if norm(sub(s0, c)) < rc + slack {
+                            balls.push((c, rc));
+                        }
+                    });
+                    let deepest = |s: [f64; 3]| {
+                        balls.iter().fold((([0.0; 3], 0.0), 0.0), |best, &(c, rc)| {
+                            let pen = rc - norm(sub(s, c));
+                            if pen > best.1 { ((c, rc), pen) } else { best }
+                        })
+                    };
+                    // Push the sample out of the neighbours' balls, back onto x's sphere.
+                    for _ in 0..4 {
+                        let ((c, rc), pen) = deepest(s);
+                        if pen <= 1e-3 * h {
+                            break;
+                        }
+                        let cs = sub(s, c);
+                        let l = norm(cs);
+                        if l == 0.0 {
+                            break;
+                        }
+                        let pushed = add(c, cs.map(|v| v * rc / l));
+                        let xs = sub(pushed, x);
+                        let lx = norm(xs);
+                        if lx == 0.0 {
+                            break;
+                        }
+                        s = add(x, xs.map(|v| v * r / lx));
+                    }
+                    let pen = if norm(sub(s, s0)) < slack {
+                        deepest(s).1
+                    } else {
+                        let mut worst = 0.0f64;
+                        for_each_neighbour(grid, [i, j, k], |c, rc| {
+                            worst = worst.max(rc - norm(sub(s, c)));
+                        });
+                        worst
+                    };
+                    if pen > tol {
+                        return (None, res);
+                    }
+                }
+                if norm(sub(s, y)) > max_shift {
                     return (None, res);
                 }
-            }
-            if norm(sub(s, y)) > max_shift {
-                return (None, res);
-            }
-            let n = if r > 0.0 {
-                sub(s, x).map(|c| -sign * c / r)
-            } else {
-                nf
-            };
-            (Some((s, n)), res)
+                let n = if r > 0.0 {
+                    sub(s, x).map(|c| -sign * c / r)
+                } else {
+                    nf
+                };
+                (Some((s, n)), res)
+            })
         })
         .collect();
     let mut g = GridSamples {
@@ -445,15 +468,20 @@ pub fn grid_samples(
 pub fn fit_residual(grid: &DistanceGrid, mesh: &TriMesh, opts: &RefineOptions) -> Result<f64> {
     let sdf = MeshSdf::for_distances(mesh)?;
     let band = opts.band * grid.h;
-    let (sq, n) = (0..grid.values.len())
-        .into_par_iter()
+    let nodes: Vec<usize> = (0..grid.values.len())
         .filter(|&f| grid.values[f].abs() < band)
-        .map(|f| {
-            let [i, j, k] = grid.coords(f);
-            let x = grid.node(i, j, k);
-            let (y, _) = sdf.closest_point_and_normal(x);
-            let res = (norm(sub(y, x)) - grid.values[f].abs()) / grid.h;
-            (res * res, 1usize)
+        .collect();
+    let (sq, n) = nodes
+        .par_chunks(QUERY_CHUNK)
+        .map(|chunk| {
+            let mut queries = ClosestQueries::default();
+            chunk.iter().fold((0.0, 0usize), |(sq, n), &f| {
+                let [i, j, k] = grid.coords(f);
+                let x = grid.node(i, j, k);
+                let (y, _) = sdf.closest_point_and_normal_with(x, &mut queries);
+                let res = (norm(sub(y, x)) - grid.values[f].abs()) / grid.h;
+                (sq + res * res, n + 1)
+            })
         })
         .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     Ok(if n == 0 { 0.0 } else { (sq / n as f64).sqrt() })
@@ -576,7 +604,7 @@ pub struct RefitStats {
 }
 
 /// Refits a PoNQ to grid samples: each sample goes to its nearest point (by v*) within
-/// `radius` cells, and with `opts.share > 0` also to the sharing points near it (`sharing`:
+/// `radius` cells, and with a sharing radius above 0 also to the sharing points near it (`sharing`:
 /// one flag per point, `None` for all; the points of cells that will be merged into one need
 /// no sharing: their cell already gathers the samples of all its points); a point with at
 /// least `min_samples` samples gets the weighted mean of their plane quadrics, scaled to the
@@ -646,9 +674,10 @@ pub fn refit(
         weight[i] += w;
         true
     };
-    if opts.share > 0.0 {
-        let share2 = (opts.share * h).powi(2);
-        let sigma2 = (0.5 * opts.share * h).powi(2);
+    let share = opts.share.unwrap_or(0.5);
+    if share > 0.0 {
+        let share2 = (share * h).powi(2);
+        let sigma2 = (0.5 * share * h).powi(2);
         let near: Vec<Vec<(u32, f64)>> = samples
             .points
             .par_iter()
@@ -702,9 +731,9 @@ pub fn refit(
             // parallel planes at a thin tip), fewer of their directions are kept, down to the
             // main plane alone; failing that the point keeps the network's values.
             let max_move = opts.max_move * h;
-            let v = [opts.cutoff, 0.2, 1.0]
+            let v = q
+                .optimal_points(reference, [opts.cutoff, 0.2, 1.0])
                 .into_iter()
-                .map(|c| q.optimal_point(reference, c))
                 .find(|v| {
                     v.iter().all(|c| c.is_finite()) && norm(sub(*v, reference)) <= max_move
                 })?;
@@ -785,6 +814,13 @@ pub fn refine(
     let rounds = opts
         .rounds
         .unwrap_or_else(|| RefineOptions::rounds_for(cells));
+    let opts = &RefineOptions {
+        share: Some(
+            opts.share
+                .unwrap_or_else(|| RefineOptions::share_for(cells)),
+        ),
+        ..opts.clone()
+    };
     for round in 0..=rounds {
         let t = Instant::now();
         if round == rounds {

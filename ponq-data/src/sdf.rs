@@ -242,6 +242,24 @@ pub fn solid_angle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     2.0 * det.atan2(den)
 }
 
+/// The state of a run of closest-point queries ([`MeshSdf::closest_point_and_normal_with`]):
+/// the traversal stack and the last query's triangle. One per thread; it may move between
+/// meshes (a triangle index out of range is ignored).
+#[derive(Debug, Clone)]
+pub struct ClosestQueries {
+    stack: [(u32, f64); STACK],
+    last: Option<u32>,
+}
+
+impl Default for ClosestQueries {
+    fn default() -> Self {
+        Self {
+            stack: [(0, 0.0); STACK],
+            last: None,
+        }
+    }
+}
+
 /// A mesh prepared for exact distance, winding-number and signed-distance queries.
 ///
 /// Build once with [`MeshSdf::new`] and query single points ([`MeshSdf::distance`],
@@ -393,7 +411,22 @@ impl MeshSdf {
     /// The point of the mesh closest to `p` and the unit normal of the triangle it lies on
     /// (oriented as the triangle's vertices; zero for a degenerate triangle).
     pub fn closest_point_and_normal(&self, p: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-        let (_, t) = self.nearest(p, None, &mut [(0, 0.0); STACK]);
+        self.closest_point_and_normal_with(p, &mut ClosestQueries::default())
+    }
+
+    /// [`MeshSdf::closest_point_and_normal`] within a run of queries: the search starts from
+    /// the distance to the previous query's triangle, so queries at nearby points in a row
+    /// (the nodes of a grid row) skip most of the tree. The distance is the same; where two
+    /// triangles are equally close (a point on the medial axis, or nearest to a shared edge)
+    /// the point and normal may be either one's.
+    pub fn closest_point_and_normal_with(
+        &self,
+        p: [f64; 3],
+        queries: &mut ClosestQueries,
+    ) -> ([f64; 3], [f64; 3]) {
+        let hint = queries.last.filter(|&t| (t as usize) < self.tris.len());
+        let (_, t) = self.nearest(p, hint, &mut queries.stack);
+        queries.last = Some(t);
         let f = self.faces[t as usize];
         let [a, b, c] = f.map(|v| self.verts[v as usize]);
         let n = cross(sub(b, a), sub(c, a));
@@ -1092,12 +1125,66 @@ fn build_tree(mesh: &TriMesh) -> (Vec<Node>, Vec<u32>) {
             }
         })
         .collect();
-    let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
-    build_rec(&mut nodes, &mut items, 0, 0);
+    let nodes = build_par(&mut items, 0, 0);
     (nodes, items.iter().map(|it| it.id).collect())
 }
 
+/// Subtrees of at least this many triangles are built on two threads (`rayon::join`).
+const PAR_BUILD_MIN: usize = 2048;
+
+/// Builds the subtree of `items` (leaf order from `start`) in pre-order with node indices
+/// local to it; the two halves of a large subtree are built in parallel and concatenated,
+/// so the result is the same as a sequential build.
+fn build_par(items: &mut [Item], start: usize, depth: usize) -> Vec<Node> {
+    if items.len() < PAR_BUILD_MIN {
+        let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
+        build_rec(&mut nodes, items, start, depth);
+        return nodes;
+    }
+    let (node, mid) = split_node(items, start, depth);
+    let Some(mid) = mid else {
+        return vec![node];
+    };
+    let (l, r) = items.split_at_mut(mid);
+    let (left, right) = rayon::join(
+        || build_par(l, start, depth + 1),
+        || build_par(r, start + mid, depth + 1),
+    );
+    let mut nodes = Vec::with_capacity(1 + left.len() + right.len());
+    nodes.push(Node {
+        right: (1 + left.len()) as u32,
+        ..node
+    });
+    let shift = |n: &Node, by: usize| Node {
+        right: if n.is_leaf() {
+            LEAF
+        } else {
+            n.right + by as u32
+        },
+        ..*n
+    };
+    nodes.extend(left.iter().map(|n| shift(n, 1)));
+    let off = nodes.len();
+    nodes.extend(right.iter().map(|n| shift(n, off)));
+    nodes
+}
+
 fn build_rec(nodes: &mut Vec<Node>, items: &mut [Item], start: usize, depth: usize) {
+    let me = nodes.len();
+    let (node, mid) = split_node(items, start, depth);
+    nodes.push(node);
+    let Some(mid) = mid else {
+        return;
+    };
+    let (l, r) = items.split_at_mut(mid);
+    build_rec(nodes, l, start, depth + 1);
+    nodes[me].right = nodes.len() as u32;
+    build_rec(nodes, r, start + mid, depth + 1);
+}
+
+/// The node of `items` (a leaf, `right` unset) and, unless it is a leaf, the size of its
+/// left part after partitioning `items`.
+fn split_node(items: &mut [Item], start: usize, depth: usize) -> (Node, Option<usize>) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     let mut clo = [f64::INFINITY; 3];
@@ -1110,16 +1197,15 @@ fn build_rec(nodes: &mut Vec<Node>, items: &mut [Item], start: usize, depth: usi
             chi[k] = chi[k].max(it.c[k]);
         }
     }
-    let me = nodes.len();
-    nodes.push(Node {
+    let node = Node {
         lo,
         hi,
         start: start as u32,
         end: (start + items.len()) as u32,
         right: LEAF,
-    });
+    };
     if items.len() <= LEAF_SIZE {
-        return;
+        return (node, None);
     }
     let mid = if depth < MAX_SAH_DEPTH {
         sah_split(items, &clo, &chi)
@@ -1137,10 +1223,7 @@ fn build_rec(nodes: &mut Vec<Node>, items: &mut [Item], start: usize, depth: usi
         items.select_nth_unstable_by(mid, |a, b| a.c[axis].total_cmp(&b.c[axis]));
         mid
     });
-    let (l, r) = items.split_at_mut(mid);
-    build_rec(nodes, l, start, depth + 1);
-    nodes[me].right = nodes.len() as u32;
-    build_rec(nodes, r, start + mid, depth + 1);
+    (node, Some(mid))
 }
 
 /// Below this depth splits minimise the surface area heuristic; deeper (or when binning

@@ -228,18 +228,15 @@ fn vstars_leave_the_nodes_balls() {
     );
 }
 
-#[test]
-fn refinement_improves_a_perturbed_ponq_and_keeps_only_better_rounds() {
-    let res = 16;
+/// The tilted box in the [-1,1] convention and a PoNQ of it like a network's at `res` cells:
+/// points near the surface (fitted to samples), each quadric a plane tilted from the truth by
+/// a few degrees, so that v* miss the edges.
+fn perturbed_box_ponq(res: usize) -> (TriMesh, Ponq) {
     let mesh = tilted_box();
     // fit_mesh works in the [-1,1] convention: take the truth there.
     let truth = ponq_data::normalize::Normalization::of(&mesh)
         .unwrap()
         .apply_mesh(&mesh);
-    let values = exact_grid(&truth, res);
-    let grid = grid_of(&values, res);
-    // A PoNQ like a network's: points near the surface (fitted to samples), each quadric a
-    // plane tilted from the truth by a few degrees, so that v* miss the edges.
     let fitted = ponq_data::fit::fit_mesh(
         &truth,
         &ponq_data::fit::FitOptions {
@@ -250,20 +247,27 @@ fn refinement_improves_a_perturbed_ponq_and_keeps_only_better_rounds() {
         |_| {},
     )
     .unwrap();
-    let perturbed = {
-        let p = &fitted.ponq;
-        let quadrics: Vec<Quadric> = p
-            .points
-            .iter()
-            .zip(&p.normals)
-            .enumerate()
-            .map(|(i, (x, n))| {
-                let t = 0.12 * ((i as f64 * 1.7).sin());
-                Quadric::from_plane(*x, [n[0] + t, n[1] - t, n[2] + 0.5 * t])
-            })
-            .collect();
-        Ponq::new(p.points.clone(), p.normals.clone(), quadrics, None).unwrap()
-    };
+    let p = &fitted.ponq;
+    let quadrics: Vec<Quadric> = p
+        .points
+        .iter()
+        .zip(&p.normals)
+        .enumerate()
+        .map(|(i, (x, n))| {
+            let t = 0.12 * ((i as f64 * 1.7).sin());
+            Quadric::from_plane(*x, [n[0] + t, n[1] - t, n[2] + 0.5 * t])
+        })
+        .collect();
+    let perturbed = Ponq::new(p.points.clone(), p.normals.clone(), quadrics, None).unwrap();
+    (truth, perturbed)
+}
+
+#[test]
+fn refinement_improves_a_perturbed_ponq_and_keeps_only_better_rounds() {
+    let res = 16;
+    let (truth, perturbed) = perturbed_box_ponq(res);
+    let values = exact_grid(&truth, res);
+    let grid = grid_of(&values, res);
     let mopts = MeshingOptions {
         grid_scale: res as f64,
         ..Default::default()
@@ -316,6 +320,41 @@ fn refinement_improves_a_perturbed_ponq_and_keeps_only_better_rounds() {
     )
     .unwrap();
     assert!(r2.residuals[r2.rounds_kept] <= r2.residuals[0]);
+}
+
+#[test]
+fn default_sharing_radius_follows_the_grid() {
+    // The PoNQ of a 16-cell grid refined against finer grids: `share: None` is
+    // `RefineOptions::share_for` the grid's cells, 0.75 from 49 to 96 cells, 0.5 otherwise.
+    assert_eq!(RefineOptions::share_for(128), 0.5);
+    let (truth, perturbed) = perturbed_box_ponq(16);
+    let mopts = MeshingOptions {
+        grid_scale: 16.0,
+        ..Default::default()
+    };
+    let base = mesh_ponq(&perturbed, &mopts).unwrap().mesh;
+    let run = |grid: &DistanceGrid, share: Option<f64>| {
+        let opts = RefineOptions {
+            share,
+            rounds: Some(1),
+            ..Default::default()
+        };
+        let r = refine(&perturbed, &base, grid, &opts, None, |p| {
+            Ok(mesh_ponq(p, &mopts)?.mesh)
+        })
+        .unwrap();
+        r.residuals
+    };
+    for (res, share) in [(40, 0.5), (56, 0.75)] {
+        assert_eq!(RefineOptions::share_for(res), share);
+        let values = exact_grid(&truth, res);
+        let grid = grid_of(&values, res);
+        let default = run(&grid, None);
+        assert_eq!(default, run(&grid, Some(share)), "{res} cells");
+        // The radius matters on this input, so the comparison above could fail.
+        let other = if share == 0.5 { 0.75 } else { 0.5 };
+        assert_ne!(default, run(&grid, Some(other)), "{res} cells");
+    }
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

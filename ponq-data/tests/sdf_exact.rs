@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ponq_data::normalize::Normalization;
 use ponq_data::occupancy::{close_mask, close_threshold, occupancy_from_samples, sample_counts};
-use ponq_data::sdf::{MeshSdf, SdfGrid, signed_distance_grid};
+use ponq_data::sdf::{ClosestQueries, MeshSdf, SdfGrid, signed_distance_grid};
 use ponq_mesh::sampling::sample_surface;
 use ponq_mesh::{TriMesh, io};
 use rayon::prelude::*;
@@ -403,6 +403,44 @@ fn random_points_match_brute_force() {
         })
         .collect();
     assert!(bad.is_empty(), "{bad:?}");
+}
+
+#[test]
+fn runs_of_closest_point_queries_match_brute_force() {
+    // csg.obj has more faces than a subtree built on one thread, so its hierarchy is built in
+    // parallel. Queries in a run start from the previous query's triangle (a grid row here,
+    // then jumps back across the part), and the run state moves to a second mesh.
+    let m = normalised(&shipped("csg.obj"));
+    let sdf = MeshSdf::for_distances(&m).unwrap();
+    let small = MeshSdf::for_distances(&cuboid([-0.2; 3], [0.3; 3])).unwrap();
+    let mut queries = ClosestQueries::default();
+    let n = 24;
+    for i in 0..n {
+        for j in [3, 11, 20] {
+            for k in 0..n {
+                let c = |t: usize| -1.1 + 2.2 * t as f64 / (n - 1) as f64;
+                let p = [c(i), c(j), c(k)];
+                let (y, normal) = sdf.closest_point_and_normal_with(p, &mut queries);
+                let want = brute_distance(&m, p);
+                let got = dot(sub(y, p), sub(y, p)).sqrt();
+                assert!(
+                    (got - want).abs() <= 1e-12 * (1.0 + want),
+                    "{p:?}: {got} vs {want}"
+                );
+                // A point of the mesh (where two are equally close, either one).
+                assert!(
+                    brute_distance(&m, y) <= 1e-12,
+                    "{p:?}: {y:?} is off the mesh"
+                );
+                assert!((dot(normal, normal) - 1.0).abs() < 1e-9);
+            }
+        }
+        let p = [0.9, -0.4, 0.1 * i as f64];
+        let (y, _) = small.closest_point_and_normal_with(p, &mut queries);
+        let (fresh, _) = small.closest_point_and_normal(p);
+        let gap = dot(sub(y, p), sub(y, p)).sqrt() - dot(sub(fresh, p), sub(fresh, p)).sqrt();
+        assert!(gap.abs() <= 1e-12, "{p:?}: {y:?} vs {fresh:?}");
+    }
 }
 
 #[test]

@@ -200,6 +200,37 @@ impl Quadric {
         }
     }
 
+    /// [`Quadric::optimal_point`] for several cut-offs from one eigen-decomposition of `A`.
+    pub fn optimal_points<const N: usize>(
+        &self,
+        reference: [f64; 3],
+        cutoffs: [f64; N],
+    ) -> [[f64; 3]; N] {
+        let r = Vector3::from(reference);
+        let rhs = self.b - self.a * r;
+        let eig = SymmetricEigen::new(self.a);
+        let smax = eig.eigenvalues.iter().fold(0.0f64, |m, &l| m.max(l.abs()));
+        if !(smax > 0.0) || !smax.is_finite() {
+            return [reference; N];
+        }
+        cutoffs.map(|cutoff| {
+            let mut x = Vector3::zeros();
+            for k in 0..3 {
+                let l = eig.eigenvalues[k];
+                if l.abs() / smax > cutoff {
+                    let u = eig.eigenvectors.column(k);
+                    x += u * (u.dot(&rhs) / l);
+                }
+            }
+            let v = r + x;
+            if v.iter().all(|c| c.is_finite()) {
+                [v[0], v[1], v[2]]
+            } else {
+                reference
+            }
+        })
+    }
+
     /// The quadric divided by `largest` (its largest eigenvalue, as from
     /// [`Quadric::optimal_point_and_scale`]); unchanged when `largest` is not positive.
     pub fn scaled_by_largest(&self, largest: f64) -> Self {
@@ -221,6 +252,21 @@ mod tests {
         assert!((q.eval([3.0, -1.0, 4.0]) - 9.0).abs() < 1e-12);
         let m = Quadric::from_matrix4(&q.to_matrix4());
         assert_eq!(m, q);
+    }
+
+    #[test]
+    fn optimal_points_match_one_cutoff_at_a_time() {
+        let q = Quadric::from_plane([0.1, 0.2, 0.3], [0.0, 0.0, 1.0])
+            + Quadric::from_plane([0.0, 0.0, 0.0], [0.0, 0.6, 0.8]) * 0.3
+            + Quadric::from_plane([0.5, 0.0, 0.0], [1.0, 0.0, 0.0]) * 0.01;
+        let r = [0.3, -0.2, 0.1];
+        let cutoffs = [0.0, 0.05, 0.2, 1.0];
+        let all = q.optimal_points(r, cutoffs);
+        for (c, v) in cutoffs.iter().zip(all) {
+            assert_eq!(v, q.optimal_point(r, *c), "cutoff {c}");
+        }
+        // The cut-offs give different points: the weakest plane is dropped at 0.05.
+        assert_ne!(all[0], all[2]);
     }
 
     #[test]

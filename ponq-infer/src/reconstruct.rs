@@ -43,7 +43,8 @@ pub struct InferOptions {
     pub merge_smooth: Option<f64>,
     /// Open-surface culling threshold.
     pub open: Option<f64>,
-    /// Flip quadrilateral diagonals onto sharp edges (`ponq_mesh::flips`; default true).
+    /// Flip quadrilateral diagonals onto sharp edges (`ponq_mesh::flips`) and flat caps away
+    /// (`ponq_mesh::caps`); default true.
     pub align_creases: bool,
     /// Which labels the tagging's small-tet rule adds (`ponq_mesh::tagging::SmallTetRule`;
     /// default inside only, as the authors' code).
@@ -344,6 +345,7 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
         ),
         open_threshold: opts.open,
         align_creases: opts.align_creases,
+        flat_caps: opts.align_creases,
         small_tet_rule: opts.small_tet_rule,
         ..Default::default()
     };

@@ -773,25 +773,46 @@ fn align(
     h: f64,
     mut prebuilt: Option<HalfEdges>,
 ) -> FlipStats {
-    let mut stats = FlipStats::default();
+    let mut passes = 0;
+    let (flips, attempts, excluded) = without_intersections(mesh, |mesh, banned| {
+        let mut stats = FlipStats::default();
+        let flipped = flip_pass(mesh, data, h, banned, prebuilt.take(), &mut stats);
+        passes = stats.passes;
+        flipped
+    });
+    FlipStats {
+        flips,
+        passes,
+        attempts,
+        excluded,
+    }
+}
+
+/// Runs a pass of flips until its flips make no self-intersection: `pass` flips edges of
+/// `mesh` (of a surface free of self-intersections), skipping the edges in `banned` (as
+/// `(min, max)` vertex pairs), and returns the face pairs it flipped. Only pairs with a
+/// flipped face can intersect, so only those are tested (exactly); when some do, the original
+/// edges of the flipped faces involved are banned and the pass runs again from the original
+/// faces, [`MAX_ATTEMPTS`] times at most, after which the mesh is left as it was. Returns the
+/// flips kept, the attempts and the number of banned edges.
+pub(crate) fn without_intersections(
+    mesh: &mut TriMesh,
+    mut pass: impl FnMut(&mut TriMesh, &FxHashSet<(u32, u32)>) -> Vec<(u32, u32)>,
+) -> (usize, usize, usize) {
     let original = mesh.faces.clone();
     let mut banned = FxHashSet::default();
     for attempt in 1..=MAX_ATTEMPTS {
-        stats.attempts = attempt;
         mesh.faces.clone_from(&original);
-        let flipped = flip_pass(mesh, data, h, &banned, prebuilt.take(), &mut stats);
-        stats.flips = flipped.len();
+        let flipped = pass(mesh, &banned);
         if flipped.is_empty() {
-            return stats;
+            return (0, attempt, banned.len());
         }
         let touched: FxHashSet<u32> = flipped.iter().flat_map(|&(a, b)| [a, b]).collect();
-        // The surface had no self-intersection before: only pairs with a flipped face can
-        // intersect now, so only those are tested.
         let mut touched_list: Vec<usize> = touched.iter().map(|&f| f as usize).collect();
         touched_list.sort_unstable();
         let bad = intersecting_face_pairs_among(mesh, &touched_list);
         if bad.is_empty() {
-            return stats;
+            return (flipped.len(), attempt, banned.len());
         }
         // Exclude the original edges of the quadrilaterals whose new faces intersect.
         for (i, j) in bad {
@@ -804,11 +825,9 @@ fn align(
                 }
             }
         }
-        stats.excluded = banned.len();
     }
     mesh.faces = original;
-    stats.flips = 0;
-    stats
+    (0, MAX_ATTEMPTS, banned.len())
 }
 
 #[cfg(test)]

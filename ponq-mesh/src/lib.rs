@@ -21,6 +21,7 @@
 //! ```
 
 pub mod bvh;
+pub mod caps;
 pub mod complex;
 pub mod cover_grid;
 pub mod cpu;

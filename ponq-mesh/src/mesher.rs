@@ -38,6 +38,10 @@ pub struct MeshingOptions {
     /// ([`crate::flips`]; default true, closed surfaces only). `false` keeps the triangles of
     /// the minimum cut as they are (the behaviour before this option).
     pub align_creases: bool,
+    /// After the crease flips, flip the flat caps away: triangles with an angle above 150
+    /// degrees in a flat part of the surface, whose normals are noise ([`crate::caps`];
+    /// default true, closed surfaces only).
+    pub flat_caps: bool,
     /// Weld tolerance, relative to the domain's largest side (default `1e-10`; 0: off). v*
     /// within this distance of each other (two v* a rounding apart: ponq-fit's PoNQs of CAD
     /// parts have some, where the quadrics of two cells meet at one corner) become one vertex,
@@ -59,6 +63,7 @@ impl Default for MeshingOptions {
             manifold: true,
             open_threshold: None,
             align_creases: true,
+            flat_caps: true,
             weld: DEFAULT_WELD,
         }
     }
@@ -128,7 +133,7 @@ pub struct StageTimes {
     pub manifold: Duration,
     /// Boundary extraction (and open-surface culling).
     pub extraction: Duration,
-    /// Crease-aligning flips of the extracted surface.
+    /// Flips of the extracted surface (crease-aligning and flat-cap flips).
     pub flips: Duration,
 }
 
@@ -162,6 +167,8 @@ pub struct MeshingStats {
     pub manifold: ManifoldStats,
     /// The crease-aligning flips.
     pub flips: crate::flips::FlipStats,
+    /// The flat-cap flips.
+    pub caps: crate::caps::CapStats,
     /// Input points merged into a vertex at another position by the weld
     /// ([`MeshingOptions::weld`]).
     pub welded: usize,
@@ -303,6 +310,15 @@ pub fn mesh_ponq(ponq: &Ponq, opts: &MeshingOptions) -> Result<MeshingOutput> {
             );
             flip_time = t.elapsed();
             stats.times.flips += flip_time;
+        }
+        if opts.flat_caps && opts.open_threshold.is_none() && opts.manifold {
+            let t = Instant::now();
+            let (lo, hi) = opts.domain;
+            let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+            stats.caps = crate::caps::flatten_caps(&mut mesh, extent / opts.grid_scale);
+            let cap_time = t.elapsed();
+            flip_time += cap_time;
+            stats.times.flips += cap_time;
         }
         if let Some(th) = opts.open_threshold {
             let aniso: Vec<f64> = back

@@ -562,7 +562,8 @@ fn infer<'py>(
 ///     open: open surface: ``True`` (threshold 0.35) or a threshold in [0, 1]: drop the
 ///         triangles whose three vertices all have quadric anisotropy above it.
 ///     crease_flips: flip quadrilateral diagonals onto the sharp edges the quadrics
-///         describe (``False``: the program's ``--no-crease-flips``).
+///         describe, and flat caps (near-180-degree triangles on flat parts) away
+///         (``False``: the program's ``--no-crease-flips``).
 ///     threads: worker threads (a pool of that size for this call); default all cores. The
 ///         mesh is the same for any count.
 ///     check: check the output's validity as the program does; a failure gives a
@@ -623,6 +624,7 @@ fn mesh<'py>(
             domain,
             open_threshold: open,
             align_creases: crease_flips,
+            flat_caps: crease_flips,
             ..Default::default()
         };
         let out = mesh_ponq(&ponq, &opts)?;

@@ -97,7 +97,8 @@ struct Args {
     #[arg(long, value_name = "P.npz")]
     save_ponq: Option<PathBuf>,
     /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
-    /// onto the sharp edges the quadrics describe.
+    /// onto the sharp edges the quadrics describe, and none of the flat caps (near-180-degree
+    /// triangles on flat parts) away.
     #[arg(long)]
     no_crease_flips: bool,
     /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no

@@ -66,7 +66,8 @@ struct Args {
     #[arg(long)]
     no_manifold: bool,
     /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
-    /// onto the sharp edges the quadrics describe (the behaviour before these flips).
+    /// onto the sharp edges the quadrics describe, and none of the flat caps (near-180-degree
+    /// triangles on flat parts) away (the behaviour before these flips).
     #[arg(long)]
     no_crease_flips: bool,
     /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no
@@ -145,6 +146,7 @@ fn run(args: &Args) -> Result<bool> {
         manifold: !(args.no_manifold || args.authors_mesher),
         open_threshold: args.open,
         align_creases: !(args.no_crease_flips || args.authors_mesher),
+        flat_caps: !(args.no_crease_flips || args.authors_mesher),
         small_tet_rule: if args.small_tets_both_ways {
             SmallTetRule::BothWays
         } else if args.authors_mesher {

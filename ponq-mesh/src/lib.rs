@@ -9,7 +9,8 @@
 //! [`tagging`] (inside / outside / unknown tets) -> [`score`] (face scores) ->
 //! [`maxflow`] + [`cut`] (minimum s-t cut) -> [`extract`] (oriented boundary) ->
 //! [`manifold`] (relabel tets until the boundary is a strict manifold) -> [`flips`] (quadrilateral
-//! diagonals onto the sharp edges the quadrics describe; on [`halfedge`]s).
+//! diagonals onto the sharp edges the quadrics describe; on [`halfedge`]s) -> [`caps`] (flat
+//! caps, near-180-degree triangles whose normals are noise, flipped away).
 //! [`mesher`] runs them all.
 //!
 //! ```no_run

@@ -179,7 +179,7 @@ fn run(args: &Args) -> Result<bool> {
             println!("note: {msg}");
         }
         println!(
-            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips; {} worker threads, {}",
+            "tets {} (tagged in {}, out {}, unknown {}), cut graph {} nodes / {} edges, manifold repair flipped {} tets, {} crease flips, {} flat caps flipped ({} attempts); {} worker threads, {}",
             s.tets,
             s.tagged[0],
             s.tagged[1],
@@ -188,6 +188,8 @@ fn run(args: &Args) -> Result<bool> {
             s.cut.edges,
             s.manifold.flipped_tets,
             s.flips.flips,
+            s.caps.flips,
+            s.caps.attempts,
             rayon::current_num_threads(),
             if ponq_mesh::cpu::has_avx2() {
                 "AVX2 paths"

@@ -11,6 +11,7 @@ use ponq_data::refine::{
 use ponq_data::sdf::MeshSdf;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
 use ponq_mesh::metrics::{MetricOptions, compare};
+use ponq_mesh::vec3::{cross, dot, sub};
 use ponq_mesh::{Ponq, Quadric, TriMesh, validity};
 
 /// A box rotated off the axes (so that no face lies on grid planes), in [-1,1]^3.
@@ -355,18 +356,4 @@ fn default_sharing_radius_follows_the_grid() {
         let other = if share == 0.5 { 0.75 } else { 0.5 };
         assert_ne!(default, run(&grid, Some(other)), "{res} cells");
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }

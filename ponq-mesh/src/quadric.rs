@@ -175,29 +175,8 @@ impl Quadric {
     /// [`Quadric::optimal_point`] and [`Quadric::largest_eigenvalue`] from one
     /// eigen-decomposition of `A`.
     pub fn optimal_point_and_scale(&self, reference: [f64; 3], cutoff: f64) -> ([f64; 3], f64) {
-        let r = Vector3::from(reference);
-        let rhs = self.b - self.a * r;
-        let eig = SymmetricEigen::new(self.a);
-        let largest = eig.eigenvalues.max();
-        // A is symmetric PSD: its SVD is its eigen-decomposition (with |lambda| as sigma).
-        let smax = eig.eigenvalues.iter().fold(0.0f64, |m, &l| m.max(l.abs()));
-        if !(smax > 0.0) || !smax.is_finite() {
-            return (reference, largest);
-        }
-        let mut x = Vector3::zeros();
-        for k in 0..3 {
-            let l = eig.eigenvalues[k];
-            if l.abs() / smax > cutoff {
-                let u = eig.eigenvectors.column(k);
-                x += u * (u.dot(&rhs) / l);
-            }
-        }
-        let v = r + x;
-        if v.iter().all(|c| c.is_finite()) {
-            ([v[0], v[1], v[2]], largest)
-        } else {
-            (reference, largest)
-        }
+        let solve = PseudoInverse::new(self, reference);
+        (solve.point(cutoff), solve.eig.eigenvalues.max())
     }
 
     /// [`Quadric::optimal_point`] for several cut-offs from one eigen-decomposition of `A`.
@@ -206,29 +185,8 @@ impl Quadric {
         reference: [f64; 3],
         cutoffs: [f64; N],
     ) -> [[f64; 3]; N] {
-        let r = Vector3::from(reference);
-        let rhs = self.b - self.a * r;
-        let eig = SymmetricEigen::new(self.a);
-        let smax = eig.eigenvalues.iter().fold(0.0f64, |m, &l| m.max(l.abs()));
-        if !(smax > 0.0) || !smax.is_finite() {
-            return [reference; N];
-        }
-        cutoffs.map(|cutoff| {
-            let mut x = Vector3::zeros();
-            for k in 0..3 {
-                let l = eig.eigenvalues[k];
-                if l.abs() / smax > cutoff {
-                    let u = eig.eigenvectors.column(k);
-                    x += u * (u.dot(&rhs) / l);
-                }
-            }
-            let v = r + x;
-            if v.iter().all(|c| c.is_finite()) {
-                [v[0], v[1], v[2]]
-            } else {
-                reference
-            }
-        })
+        let solve = PseudoInverse::new(self, reference);
+        cutoffs.map(|cutoff| solve.point(cutoff))
     }
 
     /// The quadric divided by `largest` (its largest eigenvalue, as from
@@ -238,6 +196,55 @@ impl Quadric {
             *self * (1.0 / largest)
         } else {
             *self
+        }
+    }
+}
+
+/// The eigen-decomposition of a quadric's `A` with the right-hand side around a reference
+/// point: [`PseudoInverse::point`] is [`Quadric::optimal_point`] for any cut-off.
+struct PseudoInverse {
+    reference: [f64; 3],
+    r: Vector3<f64>,
+    rhs: Vector3<f64>,
+    eig: SymmetricEigen<f64, nalgebra::U3>,
+    /// The largest `|lambda|` (A is symmetric PSD: its SVD is its eigen-decomposition, with
+    /// `|lambda|` as sigma).
+    smax: f64,
+}
+
+impl PseudoInverse {
+    fn new(q: &Quadric, reference: [f64; 3]) -> Self {
+        let r = Vector3::from(reference);
+        let eig = SymmetricEigen::new(q.a);
+        let smax = eig.eigenvalues.iter().fold(0.0f64, |m, &l| m.max(l.abs()));
+        Self {
+            reference,
+            r,
+            rhs: q.b - q.a * r,
+            eig,
+            smax,
+        }
+    }
+
+    /// `r + A^+ (b - A r)`, keeping the directions with `sigma_i / sigma_1 > cutoff`; the
+    /// reference itself for `A = 0` or a non-finite result.
+    fn point(&self, cutoff: f64) -> [f64; 3] {
+        if !(self.smax > 0.0) || !self.smax.is_finite() {
+            return self.reference;
+        }
+        let mut x = Vector3::zeros();
+        for k in 0..3 {
+            let l = self.eig.eigenvalues[k];
+            if l.abs() / self.smax > cutoff {
+                let u = self.eig.eigenvectors.column(k);
+                x += u * (u.dot(&self.rhs) / l);
+            }
+        }
+        let v = self.r + x;
+        if v.iter().all(|c| c.is_finite()) {
+            [v[0], v[1], v[2]]
+        } else {
+            self.reference
         }
     }
 }

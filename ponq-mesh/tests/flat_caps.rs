@@ -5,25 +5,9 @@
 
 use ponq_mesh::caps::flatten_caps;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
+use ponq_mesh::sampling::face_normal;
+use ponq_mesh::vec3::{dot, sub};
 use ponq_mesh::{Ponq, Quadric, TriMesh, validity};
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    a.map(|x| x / l)
-}
 
 /// A box of half-extents `half` rotated by `angles` (about z, then x): its centre is the
 /// origin, `axes` its unit axes.
@@ -122,10 +106,7 @@ fn false_sharp_edges(mesh: &TriMesh, b: &TiltedBox, away: f64) -> usize {
             faces_of.entry((u.min(v), u.max(v))).or_default().push(i);
         }
     }
-    let normal = |i: usize| {
-        let [a, b, c] = mesh.faces[i].map(|v| mesh.vertices[v as usize]);
-        unit(cross(sub(b, a), sub(c, a)))
-    };
+    let normal = |i: usize| face_normal(mesh, i);
     faces_of
         .iter()
         .filter(|&(&(u, v), fs)| {

@@ -1125,48 +1125,9 @@ fn build_tree(mesh: &TriMesh) -> (Vec<Node>, Vec<u32>) {
             }
         })
         .collect();
-    let nodes = build_par(&mut items, 0, 0);
+    let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
+    build_rec(&mut nodes, &mut items, 0, 0);
     (nodes, items.iter().map(|it| it.id).collect())
-}
-
-/// Subtrees of at least this many triangles are built on two threads (`rayon::join`).
-const PAR_BUILD_MIN: usize = 2048;
-
-/// Builds the subtree of `items` (leaf order from `start`) in pre-order with node indices
-/// local to it; the two halves of a large subtree are built in parallel and concatenated,
-/// so the result is the same as a sequential build.
-fn build_par(items: &mut [Item], start: usize, depth: usize) -> Vec<Node> {
-    if items.len() < PAR_BUILD_MIN {
-        let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
-        build_rec(&mut nodes, items, start, depth);
-        return nodes;
-    }
-    let (node, mid) = split_node(items, start, depth);
-    let Some(mid) = mid else {
-        return vec![node];
-    };
-    let (l, r) = items.split_at_mut(mid);
-    let (left, right) = rayon::join(
-        || build_par(l, start, depth + 1),
-        || build_par(r, start + mid, depth + 1),
-    );
-    let mut nodes = Vec::with_capacity(1 + left.len() + right.len());
-    nodes.push(Node {
-        right: (1 + left.len()) as u32,
-        ..node
-    });
-    let shift = |n: &Node, by: usize| Node {
-        right: if n.is_leaf() {
-            LEAF
-        } else {
-            n.right + by as u32
-        },
-        ..*n
-    };
-    nodes.extend(left.iter().map(|n| shift(n, 1)));
-    let off = nodes.len();
-    nodes.extend(right.iter().map(|n| shift(n, off)));
-    nodes
 }
 
 fn build_rec(nodes: &mut Vec<Node>, items: &mut [Item], start: usize, depth: usize) {

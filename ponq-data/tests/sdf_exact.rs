@@ -407,9 +407,8 @@ fn random_points_match_brute_force() {
 
 #[test]
 fn runs_of_closest_point_queries_match_brute_force() {
-    // csg.obj has more faces than a subtree built on one thread, so its hierarchy is built in
-    // parallel. Queries in a run start from the previous query's triangle (a grid row here,
-    // then jumps back across the part), and the run state moves to a second mesh.
+    // Queries in a run start from the previous query's triangle (a grid row here, then jumps
+    // back across the part), and the run state moves to a second mesh.
     let m = normalised(&shipped("csg.obj"));
     let sdf = MeshSdf::for_distances(&m).unwrap();
     let small = MeshSdf::for_distances(&cuboid([-0.2; 3], [0.3; 3])).unwrap();

@@ -37,7 +37,8 @@
 
 use rayon::prelude::*;
 
-use crate::validity::{o2, proj};
+use crate::corners::{corner_rows, one_cycle};
+use crate::predicates::{o2, proj};
 use crate::vec3::{cross, sub};
 
 /// Vertices of higher degree are not certified (their pairs are tested one by one): the
@@ -99,8 +100,7 @@ pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> 
         };
     }
     // The corners of each vertex `v` as (next, previous) vertex of its face, grouped by `v`.
-    let (start, corners) =
-        crate::halfedge::corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
+    let (start, corners) = corner_rows(faces, nv, |_, f, k| (f[(k + 1) % 3], f[(k + 2) % 3]));
     let per_vertex: Vec<(bool, bool)> = (0..nv)
         .into_par_iter()
         .with_min_len(1024)
@@ -116,108 +116,6 @@ pub fn vertex_fans(vertices: &[[f64; 3]], faces: &[[u32; 3]], certify: bool) -> 
     VertexFans {
         single_cycles: per_vertex.iter().all(|x| x.0),
         certified: per_vertex.into_iter().map(|x| x.1).collect(),
-    }
-}
-
-/// A corner of a vertex `v` as the directed edge `(r, r')` of `v`'s link it holds (its face
-/// is `(v, r, r')`).
-pub(crate) trait Link {
-    fn link(&self) -> (u32, u32);
-}
-
-impl Link for (u32, u32) {
-    #[inline(always)]
-    fn link(&self) -> (u32, u32) {
-        *self
-    }
-}
-
-/// Whether the directed edges `(r, r')` (the corners of a vertex: faces `(v, r, r')`) form
-/// one simple cycle: from the first, each edge's `r'` starts exactly one edge, and following
-/// them comes back to the first after visiting all. (Each edge is then the only one starting
-/// at its `r`, so the `r` are distinct, and so are the `r'`.) `false` for no edge.
-pub(crate) fn one_cycle<C: Link>(corners: &[C]) -> bool {
-    one_cycle_steps(corners, |_, _| {})
-}
-
-/// [`one_cycle`], calling `step(i, j)` for each corner `i` followed and its successor `j`
-/// (corner `j`'s `r` is corner `i`'s `r'`). When the answer is `true`, every corner was `i`
-/// once and `j` once (so `j`'s predecessor is known for every `j`).
-pub(crate) fn one_cycle_steps<C: Link>(corners: &[C], step: impl FnMut(usize, usize)) -> bool {
-    let n = corners.len();
-    if n == 0 {
-        return false;
-    }
-    if n > SMALL_DEGREE {
-        one_cycle_sorted(corners, step)
-    } else {
-        one_cycle_quadratic(corners, step)
-    }
-}
-
-/// [`one_cycle`] for a few corners: at each step a search of all of them, without early exit
-/// (branch-free).
-fn one_cycle_quadratic<C: Link>(corners: &[C], mut step_to: impl FnMut(usize, usize)) -> bool {
-    let n = corners.len();
-    let mut cur = 0usize;
-    for step in 0..n {
-        let next = corners[cur].link().1;
-        let (mut found, mut count) = (0usize, 0u32);
-        for (j, c) in corners.iter().enumerate() {
-            let hit = c.link().0 == next;
-            found = if hit { j } else { found };
-            count += hit as u32;
-        }
-        if count != 1 {
-            return false;
-        }
-        step_to(cur, found);
-        cur = found;
-        if cur == 0 {
-            // Back at the start: all corners visited iff this took n steps (a corner seen
-            // twice before would be on a cycle without the first, never coming back).
-            return step == n - 1;
-        }
-    }
-    false
-}
-
-/// Degrees up to this are tested by [`one_cycle_quadratic`], larger ones by
-/// [`one_cycle_sorted`].
-const SMALL_DEGREE: usize = 32;
-
-/// [`one_cycle`] in `O(n log n)`: the corners sorted by first vertex (a repeated one fails),
-/// then the successors found by binary search.
-fn one_cycle_sorted<C: Link>(corners: &[C], mut step_to: impl FnMut(usize, usize)) -> bool {
-    let n = corners.len();
-    // (r, r', index), sorted by r.
-    let mut e: Vec<(u32, u32, usize)> = corners
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let (r, r2) = c.link();
-            (r, r2, i)
-        })
-        .collect();
-    e.sort_unstable();
-    if e.windows(2).any(|w| w[0].0 == w[1].0) {
-        return false;
-    }
-    let next = |x: u32| e.binary_search_by_key(&x, |p| p.0).ok().map(|i| e[i]);
-    let first = corners[0].link().0;
-    let (mut cur, mut steps) = (0usize, 0usize);
-    loop {
-        match next(corners[cur].link().1) {
-            Some((_, _, j)) if steps < n => {
-                step_to(cur, j);
-                cur = j;
-                steps += 1;
-                if corners[cur].link().0 == first {
-                    return steps == n;
-                }
-            }
-            _ => return false,
-        }
     }
 }
 
@@ -287,12 +185,23 @@ fn graph_over(vertices: &[[f64; 3]], p: [f64; 3], corners: &[(u32, u32)], axis: 
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A ring whose fan turns twice, every sector the same way by less than a half-turn, the
+    /// second turn exactly through the ray of `r_0` (`r_3` lies on it).
+    pub(crate) const SECOND_TURN_THROUGH_A_RAY: [[f64; 3]; 6] = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 1.0, 0.0],
+        [-1.0, -1.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [-2.0, 2.0, 0.0],
+        [-2.0, -2.0, 0.0],
+    ];
 
     /// A fan around the origin through `ring` (closed by `apex` below, so every ring vertex
     /// has a closed fan too).
-    fn fan(ring: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    pub(crate) fn fan(ring: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
         let n = ring.len() as u32;
         let mut v = vec![[0.0, 0.0, 0.0]];
         v.extend_from_slice(ring);
@@ -307,7 +216,7 @@ mod tests {
         (v, f)
     }
 
-    fn circle(n: usize, turns: usize, z: impl Fn(usize) -> f64) -> Vec<[f64; 3]> {
+    pub(crate) fn circle(n: usize, turns: usize, z: impl Fn(usize) -> f64) -> Vec<[f64; 3]> {
         (0..n)
             .map(|i| {
                 let t = std::f64::consts::TAU * (turns * i) as f64 / n as f64;
@@ -354,15 +263,8 @@ mod tests {
         // the same way, but the projections overlap.
         let (v, f) = fan(&circle(7, 2, |i| 0.1 * i as f64));
         assert!(!graph_fans(&v, &f)[0]);
-        // Its faces do cross each other: certifying it would hide these pairs.
-        let m = crate::TriMesh::new(v, f).unwrap();
-        let n = m.faces.len();
-        let want: Vec<(usize, usize)> = (0..n)
-            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
-            .filter(|&(i, j)| crate::validity::faces_intersect(&m, i, j))
-            .collect();
-        assert!(!want.is_empty());
-        assert_eq!(crate::validity::intersecting_face_pairs(&m), want);
+        // Its faces do cross each other (`validity`'s tests: certifying it would hide these
+        // pairs).
     }
 
     #[test]
@@ -386,65 +288,9 @@ mod tests {
         // Every sector turns the same way by less than a half-turn, and the second turn
         // passes exactly through the ray of r_0 (r_3 lies on it): the crossing count must
         // handle a vertex on the counted ray.
-        let ring = [
-            [1.0, 0.0, 0.0],
-            [-1.0, 1.0, 0.0],
-            [-1.0, -1.0, 0.0],
-            [2.0, 0.0, 0.0],
-            [-2.0, 2.0, 0.0],
-            [-2.0, -2.0, 0.0],
-        ];
-        let (v, f) = fan(&ring);
+        let (v, f) = fan(&SECOND_TURN_THROUGH_A_RAY);
         assert!(!graph_fans(&v, &f)[0]);
-        let m = crate::TriMesh::new(v, f).unwrap();
-        assert!(crate::validity::check(&m).self_intersections > 0);
-    }
-
-    #[test]
-    fn both_cycle_tests_agree() {
-        // Random corner sets over few vertices (repeats, dead ends, several cycles) and
-        // shuffled cycles, small and large.
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
-        let mut r = |m: u32| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s % m as u64) as u32
-        };
-        let (mut cycles, mut others) = (0, 0);
-        for case in 0..4000 {
-            let n = 1 + r(if case % 2 == 0 { 8 } else { 80 }) as usize;
-            let mut c: Vec<(u32, u32)> = if case % 3 == 0 {
-                (0..n).map(|_| (r(n as u32 + 2), r(n as u32 + 2))).collect()
-            } else {
-                // A cycle through a shuffled ring, sometimes with one end changed.
-                let mut ring: Vec<u32> = (0..n as u32).map(|i| 3 * i + 1).collect();
-                for i in (1..n).rev() {
-                    ring.swap(i, r(i as u32 + 1) as usize);
-                }
-                let mut c: Vec<(u32, u32)> = (0..n).map(|i| (ring[i], ring[(i + 1) % n])).collect();
-                if case % 3 == 2 {
-                    let i = r(n as u32) as usize;
-                    c[i].1 = ring[r(n as u32) as usize];
-                }
-                c
-            };
-            for i in (1..c.len()).rev() {
-                c.swap(i, r(i as u32 + 1) as usize);
-            }
-            // The quadratic test whatever the size; on a cycle, both report every corner's
-            // predecessor, the corner whose r' is its r.
-            let (mut p1, mut p2) = (vec![usize::MAX; c.len()], vec![usize::MAX; c.len()]);
-            let small = one_cycle_quadratic(&c, |i, j| p1[j] = i);
-            assert_eq!(small, one_cycle_sorted(&c, |i, j| p2[j] = i), "{c:?}");
-            assert_eq!(one_cycle(&c), small);
-            if small {
-                assert_eq!(p1, p2);
-                assert!((0..c.len()).all(|j| p1[j] < c.len() && c[p1[j]].1 == c[j].0));
-            }
-            if small { cycles += 1 } else { others += 1 }
-        }
-        assert!(cycles > 500 && others > 500, "{cycles} / {others}");
+        // Its faces do cross each other (`validity`'s tests).
     }
 
     #[test]

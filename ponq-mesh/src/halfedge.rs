@@ -23,6 +23,8 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use rayon::prelude::*;
 
+use crate::corners::{Link, PARALLEL_MIN_CORNERS, corner_rows, one_cycle_steps};
+
 /// No half-edge.
 pub const NONE: u32 = u32::MAX;
 
@@ -35,7 +37,7 @@ pub(crate) struct Outgoing {
     before: u32,
 }
 
-impl crate::fan::Link for Outgoing {
+impl Link for Outgoing {
     /// The edge of the origin's link this corner holds: from the target to the vertex before.
     #[inline(always)]
     fn link(&self) -> (u32, u32) {
@@ -88,7 +90,7 @@ impl HalfEdges {
     }
 
     /// The vertices (with faces) whose link in [`outgoing_rows`] `(start, rows)` is not one
-    /// cycle ([`crate::fan::one_cycle`]) and, if `half_edges` and there are none, the
+    /// cycle ([`crate::corners::one_cycle`]) and, if `half_edges` and there are none, the
     /// half-edges. Every link one cycle is what [`HalfEdges::new`] asks (each edge in two
     /// faces that traverse it in opposite directions, one fan per vertex), and following the
     /// cycles gives the opposites: the opposite of `h = u -> v` is the one half-edge `v -> u`,
@@ -117,7 +119,7 @@ impl HalfEdges {
             .with_min_len(1024)
             .filter(|&u| {
                 let c = row(u);
-                let one = crate::fan::one_cycle_steps(c, |i, j| {
+                let one = one_cycle_steps(c, |i, j| {
                     if half_edges {
                         opp[c[j].h as usize].store(Self::prev(c[i].h), Relaxed);
                     }
@@ -302,110 +304,6 @@ fn collect_indexed<T: Send>(
     }
 }
 
-/// Surfaces with at least this many corners (3 per face; about 175k points) group them by
-/// vertex in parallel ([`corner_rows`], [`HalfEdges::checking_links`]).
-const PARALLEL_MIN_CORNERS: usize = 1 << 20;
-
-/// The corners of the faces grouped by vertex (compressed rows, a counting sort): the corners
-/// of vertex `v` are `rows[start[v]..start[v + 1]]`, in face order, each made by
-/// `corner(face index, face, k)` for the face's position `k` holding `v`. Every index of
-/// `faces` must be below `n`.
-///
-/// In parallel over vertex ranges: each thread scans all faces and counts, then writes, the
-/// corners of its own range only (its part of `rows`), so the rows come out the same as from
-/// one scan. A single scan was sequential and, past the cache, bound by its scattered writes
-/// (at 870k faces ~20 ms, 12 times its time at 200k faces).
-pub(crate) fn corner_rows<T: Copy + Default + Send + Sync>(
-    faces: &[[u32; 3]],
-    n: usize,
-    corner: impl Fn(usize, &[u32; 3], usize) -> T + Sync,
-) -> (Vec<u32>, Vec<T>) {
-    // Below [`PARALLEL_MIN_CORNERS`] in one range: there the scan is fast (its rows fit in
-    // the cache), and a parallel call from outside the pool waits for a worker to wake up
-    // (fresh `ponq-mesh` processes, 10k-109k points: the manifold stage 0.2-0.5 ms slower).
-    let parts = if 3 * faces.len() < PARALLEL_MIN_CORNERS {
-        1
-    } else {
-        rayon::current_num_threads().clamp(1, 16)
-    };
-    corner_rows_in_parts(faces, n, parts, corner)
-}
-
-/// [`corner_rows`] with the vertices cut into `parts` ranges (at least one).
-fn corner_rows_in_parts<T: Copy + Default + Send + Sync>(
-    faces: &[[u32; 3]],
-    n: usize,
-    parts: usize,
-    corner: impl Fn(usize, &[u32; 3], usize) -> T + Sync,
-) -> (Vec<u32>, Vec<T>) {
-    use rayon::prelude::*;
-    // Range `c`: the vertices from `bound(c)` to `bound(c + 1)`. One range runs on this
-    // thread (no call into the pool), several in parallel.
-    let parts = parts.max(1);
-    let chunk = n.div_ceil(parts).max(1);
-    let bound = |c: usize| (chunk * c).min(n) as u32;
-    // `start[v + 1]` counts the corners of `v`, then the prefix sums make it the row ends.
-    let mut start = vec![0u32; n + 1];
-    let count_range = |(c, count): (usize, &mut [u32])| {
-        let lo = bound(c);
-        for f in faces {
-            for &v in f {
-                if let Some(x) = v.checked_sub(lo).and_then(|i| count.get_mut(i as usize)) {
-                    *x += 1;
-                }
-            }
-        }
-    };
-    if parts == 1 {
-        start[1..]
-            .chunks_mut(chunk)
-            .enumerate()
-            .for_each(count_range);
-    } else {
-        start[1..]
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .for_each(count_range);
-    }
-    for v in 0..n {
-        start[v + 1] += start[v];
-    }
-    let mut rows = vec![T::default(); start[n] as usize];
-    // Each range's rows are one slice of `rows`.
-    let mut slices = Vec::with_capacity(parts);
-    let mut rest = &mut rows[..];
-    for c in 0..parts {
-        let len = (start[bound(c + 1) as usize] - start[bound(c) as usize]) as usize;
-        let (mine, tail) = rest.split_at_mut(len);
-        slices.push((c, mine));
-        rest = tail;
-    }
-    let fill_range = |(c, mine): (usize, &mut [T])| {
-        let (lo, hi) = (bound(c), bound(c + 1));
-        let base = start[lo as usize];
-        let mut fill: Vec<u32> = start[lo as usize..hi as usize]
-            .iter()
-            .map(|&s| s - base)
-            .collect();
-        for (fi, f) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let v = f[k];
-                if v >= lo && v < hi {
-                    let i = &mut fill[(v - lo) as usize];
-                    mine[*i as usize] = corner(fi, f, k);
-                    *i += 1;
-                }
-            }
-        }
-    };
-    if parts == 1 {
-        slices.into_iter().for_each(fill_range);
-    } else {
-        slices.into_par_iter().for_each(fill_range);
-    }
-    (start, rows)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -423,36 +321,6 @@ mod tests {
             [3, 1, 5],
             [0, 3, 5],
         ]
-    }
-
-    /// The corner rows in any number of vertex ranges are those of one plain counting sort,
-    /// on random faces over vertices some of which are in no face.
-    #[test]
-    fn corner_rows_in_parts_are_one_scans() {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
-        for (n, nf) in [(0, 0), (1, 0), (3, 1), (7, 5), (1000, 3000), (4097, 40_000)] {
-            let faces: Vec<[u32; 3]> = (0..nf)
-                .map(|_| [0; 3].map(|_| rng.random_range(0..n as u32)))
-                .collect();
-            let corner = |fi: usize, f: &[u32; 3], k: usize| (fi as u32, f[(k + 1) % 3]);
-            let mut start = vec![0u32; n + 1];
-            let mut rows: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
-            for (fi, f) in faces.iter().enumerate() {
-                for k in 0..3 {
-                    rows[f[k] as usize].push(corner(fi, f, k));
-                }
-            }
-            for v in 0..n {
-                start[v + 1] = start[v] + rows[v].len() as u32;
-            }
-            let flat: Vec<(u32, u32)> = rows.concat();
-            for parts in [1, 2, 3, 5, 16] {
-                let got = corner_rows_in_parts(&faces, n, parts, corner);
-                assert_eq!(got, (start.clone(), flat.clone()), "n {n}, {parts} parts");
-            }
-            assert_eq!(corner_rows(&faces, n, corner), (start, flat), "n {n}");
-        }
     }
 
     fn check_invariants(he: &HalfEdges, faces: &[[u32; 3]], n: usize) {

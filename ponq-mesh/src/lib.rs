@@ -23,7 +23,9 @@
 
 pub mod bvh;
 pub mod caps;
+pub mod cli;
 pub mod complex;
+pub mod corners;
 pub mod cover_grid;
 pub mod cpu;
 pub mod cut;

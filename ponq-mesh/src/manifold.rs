@@ -146,7 +146,7 @@ pub fn nonmanifold_surface_vertices(cx: &TetComplex, labels: &[Label]) -> Vec<u3
 }
 
 /// [`nonmanifold_surface_vertices`] of the boundary `faces` over `nv` vertices: the link of
-/// `v` in face `(v, b, c)` is the edge `b -> c`, the corner of `v` ([`crate::fan::one_cycle`]
+/// `v` in face `(v, b, c)` is the edge `b -> c`, the corner of `v` ([`crate::corners::one_cycle`]
 /// on the corners grouped by vertex, in parallel); with `half_edges`, also the half-edges of
 /// the faces when there is none ([`HalfEdges::checking_links`]).
 fn nonmanifold_vertices_of(

@@ -665,6 +665,13 @@ fn mesh_pass(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::flips::reference;
+    use crate::flips::{
+        FlipStats, VertexData, align_creases, align_creases_indexed, flip_pass, well_shaped,
+    };
+    use crate::vec3::{cross, dot};
+    use rand::{Rng, SeedableRng};
+    use rustc_hash::FxHashSet;
 
     #[test]
     fn boxes_and_thresholds_are_checked() {
@@ -723,5 +730,178 @@ mod tests {
             ..Default::default()
         };
         assert!(mesh_ponq(&Ponq::default(), &small).is_ok());
+    }
+
+    // The crease flips on the mesher's own outputs (here rather than in `flips`, which the
+    // mesher calls: the tests' meshes come from the mesher).
+
+    /// Samples of the surface of a box rotated by `angle` about the axis (1, 1, 0)/sqrt(2):
+    /// sharp edges at every angle to the grid.
+    fn rotated_box(
+        half: [f64; 3],
+        angle: f64,
+        n: usize,
+        seed: u64,
+    ) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (c, s) = (angle.cos(), angle.sin());
+        let k = [
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+        ];
+        // Rodrigues' rotation about the unit axis k.
+        let rot = |v: [f64; 3]| -> [f64; 3] {
+            let kv = dot(k, v);
+            let x = cross(k, v);
+            std::array::from_fn(|i| v[i] * c + x[i] * s + k[i] * kv * (1.0 - c))
+        };
+        let (mut pts, mut nrm) = (Vec::new(), Vec::new());
+        for _ in 0..n {
+            let axis = rng.random_range(0..3usize);
+            let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let mut p: [f64; 3] = std::array::from_fn(|i| rng.random_range(-half[i]..half[i]));
+            p[axis] = side * half[axis];
+            let mut q = [0.0; 3];
+            q[axis] = side;
+            pts.push(rot(p));
+            nrm.push(rot(q));
+        }
+        (pts, nrm)
+    }
+
+    /// A rotated box's PoNQ on a `grid`^3 grid, meshed without flips, with each mesh vertex's
+    /// normalised quadric and unit normal (gathered from its source point).
+    fn unflipped_box(
+        grid: usize,
+        angle: f64,
+        samples: usize,
+        seed: u64,
+    ) -> (TriMesh, Vec<Quadric>, Vec<[f64; 3]>) {
+        let (pts, nrm) = rotated_box([0.55, 0.4, 0.3], angle, samples, seed);
+        let cell = |p: &[f64; 3]| {
+            let c =
+                |x: f64| (((x + 1.0) / 2.0 * grid as f64).floor().max(0.0) as usize).min(grid - 1);
+            ((c(p[0]) * grid + c(p[1])) * grid + c(p[2])) as u32
+        };
+        let ids: Vec<u32> = pts.iter().map(cell).collect();
+        let (ponq, _) = Ponq::from_clusters(&pts, &nrm, &ids, grid * grid * grid).unwrap();
+        let opts = MeshingOptions {
+            grid_scale: grid as f64,
+            align_creases: false,
+            ..Default::default()
+        };
+        let out = mesh_ponq(&ponq, &opts).unwrap();
+        let q: Vec<Quadric> = out
+            .source_point
+            .iter()
+            .map(|&s| ponq.quadrics[s as usize].normalized())
+            .collect();
+        let n: Vec<[f64; 3]> = out
+            .source_point
+            .iter()
+            .map(|&s| {
+                let m = ponq.normals[s as usize];
+                let l = dot(m, m).sqrt().max(1e-30);
+                m.map(|x| x / l)
+            })
+            .collect();
+        (out.mesh, q, n)
+    }
+
+    /// The work-list pass flips exactly what plain sweeps over all edges flip (same faces,
+    /// same flips in the same order, same pass count), with and without banned edges, on
+    /// meshes of rotated boxes where flips happen over several passes.
+    #[test]
+    fn work_lists_flip_exactly_what_sweeps_flip() {
+        let mut with_flips = 0;
+        let mut multi_pass = 0;
+        for (seed, grid, angle) in [
+            (6u64, 36usize, 0.6),
+            (8, 24, 0.7),
+            (13, 36, 0.3),
+            (9, 20, 0.7),
+        ] {
+            let (mesh, q, n) = unflipped_box(grid, angle, 40_000, seed);
+            let h = (grid * grid) as f64;
+            let mut banned_sets = vec![FxHashSet::default()];
+            let every_7th: FxHashSet<(u32, u32)> = reference::edge_faces(&mesh)
+                .keys()
+                .copied()
+                .filter(|e| (e.0 + 3 * e.1) % 7 == 0)
+                .collect();
+            banned_sets.push(every_7th);
+            for banned in &banned_sets {
+                let (mut m1, mut m2) = (mesh.clone(), mesh.clone());
+                let (mut s1, mut s2) = (FlipStats::default(), FlipStats::default());
+                let data = VertexData::new(&q, &n, None);
+                // Half the runs on half-edges built beforehand (as the mesher passes them).
+                let prebuilt = (seed % 2 == 0)
+                    .then(|| HalfEdges::new(&mesh.faces, mesh.vertices.len()))
+                    .flatten();
+                let f1 = flip_pass(&mut m1, data, h, banned, prebuilt, &mut s1);
+                let f2 = reference::flip_pass_sweeps(&mut m2, data, h, banned, &mut s2);
+                assert_eq!(f1, f2, "seed {seed}: the flips differ");
+                assert_eq!(m1.faces, m2.faces, "seed {seed}: the faces differ");
+                assert_eq!(s1.passes, s2.passes, "seed {seed}");
+                // Every face a flip made (its last state) has no angle above 150 degrees
+                // (without the rule, seed 6 has one).
+                for &(i, j) in &f1 {
+                    for f in [i, j] {
+                        assert!(
+                            well_shaped(&m1, m1.faces[f as usize]),
+                            "seed {seed}: a sliver"
+                        );
+                    }
+                }
+                if !f1.is_empty() {
+                    with_flips += 1;
+                }
+                if s1.passes >= 3 {
+                    multi_pass += 1;
+                }
+            }
+        }
+        eprintln!("cases with flips: {with_flips}, with >= 3 passes: {multi_pass}");
+        assert!(with_flips >= 4, "only {with_flips} cases flipped anything");
+        assert!(multi_pass >= 1, "no case needed a second flipping pass");
+    }
+
+    /// Reading the data through an index gives the same flips as gathering it first (here the
+    /// index is a shuffled, padded layout of the same data); an index of the wrong length or
+    /// out of range changes nothing.
+    #[test]
+    fn indexed_data_flips_like_gathered_data() {
+        let grid = 36usize;
+        let (mesh, q, n) = unflipped_box(grid, 0.6, 40_000, 6);
+        let nv = mesh.vertices.len();
+        // Vertex w's data at slot index[w] of arrays twice as long (the rest is junk).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mut slots: Vec<u32> = (0..2 * nv as u32).collect();
+        for i in (1..slots.len()).rev() {
+            slots.swap(i, rng.random_range(0..=i));
+        }
+        let index: Vec<u32> = slots[..nv].to_vec();
+        let mut q2 = vec![Quadric::identity_at([0.3, 0.1, -0.2]); 2 * nv];
+        let mut n2 = vec![[0.0, 0.0, 1.0]; 2 * nv];
+        for (w, &i) in index.iter().enumerate() {
+            q2[i as usize] = q[w];
+            n2[i as usize] = n[w];
+        }
+        let h = (grid * grid) as f64;
+        let (mut m1, mut m2) = (mesh.clone(), mesh.clone());
+        let s1 = align_creases(&mut m1, &q, &n, h);
+        let s2 = align_creases_indexed(&mut m2, &q2, &n2, &index, h);
+        assert!(s1.flips > 10, "only {} flips", s1.flips);
+        assert_eq!(s1, s2);
+        assert_eq!(m1.faces, m2.faces);
+        for bad in [&index[1..], &[u32::MAX; 1][..]] {
+            let mut m3 = mesh.clone();
+            let mut bad = bad.to_vec();
+            bad.resize(if bad.len() == 1 { nv } else { bad.len() }, 0);
+            let s3 = align_creases_indexed(&mut m3, &q2, &n2, &bad, h);
+            assert_eq!(s3, FlipStats::default());
+            assert_eq!(m3.faces, mesh.faces);
+        }
     }
 }

@@ -12,7 +12,7 @@
 //! side of the plane `abc` that `(b-a) x (c-a)` points to. A tetrahedron `(a, b, c, d)` is
 //! *positively oriented* when `orient3d(a, b, c, d) > 0`.
 
-use robust::Coord3D;
+use robust::{Coord, Coord3D, orient2d};
 
 /// `max` without NaN handling (one `maxsd`); the filters fall back to the exact predicate when a
 /// bound is not finite.
@@ -959,6 +959,23 @@ mod fixed {
         );
         // Negative when e is inside: see `insphere_bounded`.
         -fixed_signum(&det)
+    }
+}
+
+/// Exact sign of `orient2d(a, b, c)` (positive: counter-clockwise), for the 2D tests on an axis
+/// projection ([`proj`]) of the validity check and the fan certificate.
+#[inline]
+pub(crate) fn o2(a: Coord<f64>, b: Coord<f64>, c: Coord<f64>) -> i8 {
+    sign(orient2d(a, b, c)) as i8
+}
+
+/// Projection dropping coordinate `axis`.
+#[inline]
+pub(crate) fn proj(p: &[f64; 3], axis: u8) -> Coord<f64> {
+    match axis {
+        0 => Coord { x: p[1], y: p[2] },
+        1 => Coord { x: p[2], y: p[0] },
+        _ => Coord { x: p[0], y: p[1] },
     }
 }
 

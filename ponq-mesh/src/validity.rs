@@ -31,12 +31,13 @@
 use std::fmt;
 
 use rayon::prelude::*;
-use robust::{Coord, orient2d};
 
 use crate::bvh::{Aabb, Bvh};
 use crate::cover_grid::CoverGrid;
 use crate::fan::{VertexFans, graph_fans, vertex_fans};
+use crate::predicates::{o2, proj};
 use crate::trimesh::TriMesh;
+use robust::Coord;
 
 /// Outcome of [`check`] / [`check_topology`].
 ///
@@ -728,33 +729,6 @@ fn o3(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3], d: &[f64; 3]) -> i8 {
     -(crate::predicates::orient3d(a, b, c, d) as i8)
 }
 
-/// Exact sign of `orient2d(a, b, c)`.
-#[inline]
-pub(crate) fn o2(a: Coord<f64>, b: Coord<f64>, c: Coord<f64>) -> i8 {
-    sign(orient2d(a, b, c))
-}
-
-#[inline]
-fn sign(x: f64) -> i8 {
-    if x > 0.0 {
-        1
-    } else if x < 0.0 {
-        -1
-    } else {
-        0
-    }
-}
-
-/// Projection dropping coordinate `axis`.
-#[inline]
-pub(crate) fn proj(p: &[f64; 3], axis: u8) -> Coord<f64> {
-    match axis {
-        0 => Coord { x: p[1], y: p[2] },
-        1 => Coord { x: p[2], y: p[0] },
-        _ => Coord { x: p[0], y: p[1] },
-    }
-}
-
 /// An axis whose projection keeps the triangle non-degenerate (hence is injective on its
 /// plane); `None` iff the corners are collinear (or coincide).
 fn proj_axis(t: &[[f64; 3]; 3]) -> Option<u8> {
@@ -923,6 +897,27 @@ impl UnionFind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fan::tests::{SECOND_TURN_THROUGH_A_RAY, circle, fan};
+
+    /// The uncertified fans of `fan`'s tests do have crossing faces: certifying them would hide
+    /// these pairs. Seven faces going round twice (each sector less than a half-turn, all
+    /// turning the same way, the projections overlapping) and a second turn through the ray of
+    /// the first corner.
+    #[test]
+    fn fans_the_certificate_refuses_do_cross() {
+        let (v, f) = fan(&circle(7, 2, |i| 0.1 * i as f64));
+        let m = TriMesh::new(v, f).unwrap();
+        let n = m.faces.len();
+        let want: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .filter(|&(i, j)| faces_intersect(&m, i, j))
+            .collect();
+        assert!(!want.is_empty());
+        assert_eq!(intersecting_face_pairs(&m), want);
+        let (v, f) = fan(&SECOND_TURN_THROUGH_A_RAY);
+        let m = TriMesh::new(v, f).unwrap();
+        assert!(check(&m).self_intersections > 0);
+    }
 
     fn c(x: f64, y: f64) -> Coord<f64> {
         Coord { x, y }

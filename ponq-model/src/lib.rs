@@ -21,6 +21,7 @@
 //! # let _ = ponq;
 //! ```
 
+pub mod activation;
 pub mod backend;
 pub mod error;
 pub mod fast;

@@ -11,8 +11,7 @@ use burn::tensor::activation::{leaky_relu, sigmoid};
 
 use crate::fast::{self, Kernels};
 
-/// Slope of every LeakyReLU of the network.
-pub const LEAKY_SLOPE: f64 = 0.01;
+pub use crate::activation::LEAKY_SLOPE;
 
 /// Hyper-parameters of [`PonqNet`].
 #[derive(Config, Debug, PartialEq)]

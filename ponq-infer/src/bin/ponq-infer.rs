@@ -10,8 +10,8 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_infer::mesh_input::mesh_grid;
 use ponq_infer::{InferOptions, RefineMode, finish, predict, shipped};
+use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::mesher::MeshingOptions;
-use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{io, validity};
 use ponq_model::backend::{BackendKind, device};
 
@@ -85,32 +85,11 @@ struct Args {
     /// `wgpu` cargo feature) or cuda (NVIDIA; needs the `cuda` cargo feature and a driver).
     #[arg(long, default_value = "flex")]
     backend: BackendKind,
-    /// Box spanned by the grid nodes: xmin,ymin,zmin,xmax,ymax,zmax [default: -1,-1,-1,1,1,1].
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_hyphen_values = true,
-        value_name = "X0,Y0,Z0,X1,Y1,Z1"
-    )]
-    bounds: Option<Vec<f64>>,
     /// Also write the predicted PoNQ (points, normals, quadrics, v*) as `.npz`.
     #[arg(long, value_name = "P.npz")]
     save_ponq: Option<PathBuf>,
-    /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
-    /// onto the sharp edges the quadrics describe, and none of the flat caps (near-180-degree
-    /// triangles on flat parts) away.
-    #[arg(long)]
-    no_crease_flips: bool,
-    /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no
-    /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
-    /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
-    /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
-    /// before 2026-12-03). See docs/meshing.md.
-    #[arg(long, value_name = "RULE", default_value = "inside")]
-    small_tets: SmallTetRule,
-    /// Same as `--small-tets both` (kept for earlier scripts).
-    #[arg(long, conflicts_with = "small_tets")]
-    small_tets_both_ways: bool,
+    #[command(flatten)]
+    mesher: MesherFlags,
     /// Layer implementation on the CPU: fast (custom kernels, default), fast-bf16 (the same
     /// with bf16 GEMM inputs and f32 sums: AMX tiles or AVX-512 BF16, an error on CPUs
     /// without) or stock (Burn's Conv3d layers). fast and stock give the same numbers up to
@@ -200,12 +179,9 @@ fn run(args: &Args) -> Result<Outcome> {
             args.output.display()
         );
     }
-    let bounds = match &args.bounds {
-        None => ([-1.0; 3], [1.0; 3]),
-        Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
-    };
+    let bounds = args.mesher.domain().context("--bounds")?;
     let mesh_input = is_mesh_path(&args.input);
-    if mesh_input && args.bounds.is_some() {
+    if mesh_input && args.mesher.bounds.is_some() {
         bail!("--bounds is for SDF grids: a mesh input is normalised into [-1,1]^3");
     }
     if !mesh_input && (args.res.is_some() || args.normalized) {
@@ -273,12 +249,8 @@ fn run(args: &Args) -> Result<Outcome> {
         merge_smooth: (args.merge_smooth > 0.0).then_some(args.merge_smooth),
         open: args.open,
         authors_cell_base: authors,
-        align_creases: !args.no_crease_flips,
-        small_tet_rule: if args.small_tets_both_ways {
-            SmallTetRule::BothWays
-        } else {
-            args.small_tets
-        },
+        align_creases: !args.mesher.no_crease_flips,
+        small_tet_rule: args.mesher.small_tet_rule(),
         refine: if args.lite || args.coarsen > 0 {
             RefineMode::Off
         } else {

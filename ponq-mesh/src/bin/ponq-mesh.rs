@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
+use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::io;
 use ponq_mesh::lite::simplify_by_position;
 use ponq_mesh::mesher::{MeshingOptions, mesh_ponq};
@@ -53,33 +54,12 @@ struct Args {
     /// (lambda2/lambda1) above T, in [0, 1]. Without a value T = 0.35.
     #[arg(long, value_name = "T", num_args = 0..=1, default_missing_value = "0.35")]
     open: Option<f64>,
-    /// Domain box xmin,ymin,zmin,xmax,ymax,zmax (default -1,-1,-1,1,1,1).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_hyphen_values = true,
-        value_name = "X0,Y0,Z0,X1,Y1,Z1"
-    )]
-    bounds: Option<Vec<f64>>,
     /// Skip the manifold repair (output is still closed and free of self-intersections,
     /// but may have non-manifold edges or vertices, as the authors' mesher).
     #[arg(long)]
     no_manifold: bool,
-    /// Keep the triangles of the minimum cut as they are: no flips of quadrilateral diagonals
-    /// onto the sharp edges the quadrics describe, and none of the flat caps (near-180-degree
-    /// triangles on flat parts) away (the behaviour before these flips).
-    #[arg(long)]
-    no_crease_flips: bool,
-    /// The small-tet rule of the tagging: `inside` (default: a vertex with an outside tet but no
-    /// inside tet gets its smallest unknown tet tagged inside, if small; the authors' intent),
-    /// `authors` (their code to the letter: the smallest of all the vertex's tets, whatever its
-    /// label, flags read once), `both` (the paper's text: inside and outside tets; the rule
-    /// before 2026-12-03). See docs/meshing.md.
-    #[arg(long, value_name = "RULE", default_value = "inside")]
-    small_tets: SmallTetRule,
-    /// Same as `--small-tets both` (kept for earlier scripts).
-    #[arg(long, conflicts_with = "small_tets")]
-    small_tets_both_ways: bool,
+    #[command(flatten)]
+    mesher: MesherFlags,
     /// The authors' mesher to the letter: `--small-tets authors --no-crease-flips
     /// --no-manifold`. With an exact minimum cut in their code its output is ours face for
     /// face (docs/meshing.md); like theirs it may have non-manifold edges or vertices.
@@ -121,10 +101,7 @@ fn run(args: &Args) -> Result<bool> {
     if args.merge_smooth.is_some() && args.lite {
         bail!("--merge-smooth and --lite exclude each other (--lite merges every cell)");
     }
-    let domain = match &args.bounds {
-        None => ([-1.0; 3], [1.0; 3]),
-        Some(b) => MeshingOptions::domain_from(b).context("--bounds")?,
-    };
+    let domain = args.mesher.domain().context("--bounds")?;
     let t0 = Instant::now();
     let ponq = io::npz::read_ponq(&args.input).context("reading the PoNQ file")?;
     let read_time = t0.elapsed();
@@ -145,14 +122,12 @@ fn run(args: &Args) -> Result<bool> {
         domain,
         manifold: !(args.no_manifold || args.authors_mesher),
         open_threshold: args.open,
-        align_creases: !(args.no_crease_flips || args.authors_mesher),
-        flat_caps: !(args.no_crease_flips || args.authors_mesher),
-        small_tet_rule: if args.small_tets_both_ways {
-            SmallTetRule::BothWays
-        } else if args.authors_mesher {
+        align_creases: !(args.mesher.no_crease_flips || args.authors_mesher),
+        flat_caps: !(args.mesher.no_crease_flips || args.authors_mesher),
+        small_tet_rule: if args.authors_mesher {
             SmallTetRule::Authors
         } else {
-            args.small_tets
+            args.mesher.small_tet_rule()
         },
         weld: args.weld,
         ..Default::default()

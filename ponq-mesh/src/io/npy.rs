@@ -11,7 +11,8 @@ use std::path::Path;
 
 use npyz::WriterBuilder;
 
-use super::{MAX_PREALLOC, write_file};
+use super::builder::MAX_PREALLOC;
+use super::file::write_file;
 use crate::error::{Error, Result};
 
 /// A 3D grid of values stored in C order: `data[(i * dims[1] + j) * dims[2] + k]` is the

@@ -11,7 +11,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::{MeshBuilder, capped_capacity, check_writable, parse_f64, read_file, write_file};
+use super::builder::{MeshBuilder, capped_capacity, parse_f64};
+use super::file::{check_writable, read_file, write_lines_par, write_mesh_file};
 use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;
 
@@ -159,10 +160,10 @@ pub fn write_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()> {
         .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
     writeln!(w, "OFF")?;
     writeln!(w, "{} {} 0", mesh.vertices.len(), mesh.faces.len())?;
-    super::write_lines_par(&mut w, &mesh.vertices, |o, v| {
+    write_lines_par(&mut w, &mesh.vertices, |o, v| {
         writeln!(o, "{:?} {:?} {:?}", v[0], v[1], v[2])
     })?;
-    super::write_lines_par(&mut w, &mesh.faces, |o, f| {
+    write_lines_par(&mut w, &mesh.faces, |o, f| {
         writeln!(o, "3 {} {} {}", f[0], f[1], f[2])
     })
 }
@@ -170,9 +171,7 @@ pub fn write_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()> {
 /// Writes `mesh` to the OFF file `path`; errors name the file. A mesh with a face index out
 /// of range or a non-finite coordinate gives [`Error::InvalidInput`] and no file.
 pub fn write(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
-    let path = path.as_ref();
-    check_writable(mesh)?;
-    write_file(path, |w| write_to(w, mesh))
+    write_mesh_file(path.as_ref(), mesh, |w, m| write_to(w, m))
 }
 
 #[cfg(test)]

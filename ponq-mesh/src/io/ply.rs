@@ -18,7 +18,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::{MeshBuilder, capped_capacity, check_writable, read_file, write_file};
+use super::builder::{MeshBuilder, capped_capacity};
+use super::file::{check_writable, read_file, write_mesh_file};
 use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;
 
@@ -585,17 +586,13 @@ pub fn write_ascii_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()>
 /// Writes `mesh` to `path` as binary little-endian PLY; errors name the file. A mesh with a
 /// face index out of range or a non-finite coordinate gives [`Error::InvalidInput`].
 pub fn write(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
-    let path = path.as_ref();
-    check_writable(mesh)?;
-    write_file(path, |w| write_to(w, mesh))
+    write_mesh_file(path.as_ref(), mesh, |w, m| write_to(w, m))
 }
 
 /// Writes `mesh` to `path` as ASCII PLY; errors name the file. A mesh with a face index out
 /// of range or a non-finite coordinate gives [`Error::InvalidInput`].
 pub fn write_ascii(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
-    let path = path.as_ref();
-    check_writable(mesh)?;
-    write_file(path, |w| write_ascii_to(w, mesh))
+    write_mesh_file(path.as_ref(), mesh, |w, m| write_ascii_to(w, m))
 }
 
 #[cfg(test)]

@@ -11,7 +11,8 @@ use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
 
-use super::{MeshBuilder, read_file};
+use super::builder::MeshBuilder;
+use super::file::read_file;
 use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;
 

@@ -1,5 +1,5 @@
 //! A bf16 GEMM with f32 accumulation, for
-//! [`Precision::Bf16`](super::kernels::Precision): `C (+)= A B` where `A` and `B` are rounded to
+//! `Precision::Bf16` (the kernels' precision): `C (+)= A B` where `A` and `B` are rounded to
 //! bf16 (round to nearest even) and every product is summed in f32.
 //!
 //! Two engines, chosen at run time ([`engine`]):
@@ -748,8 +748,8 @@ unsafe fn micro<const V: usize>(
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
-    use super::super::kernels::tests::lcg;
     use super::*;
+    use crate::fast::testing::lcg;
 
     /// Packing `B` once gives the same bits as packing it per call.
     #[test]

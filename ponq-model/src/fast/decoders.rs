@@ -224,7 +224,7 @@ impl<'a> Plan<'a> {
             s,
             theta,
             mats,
-            act: Act::Leaky(crate::model::LEAKY_SLOPE as f32),
+            act: Act::Leaky(crate::activation::LEAKY_SLOPE as f32),
             prec,
             fwd,
             first,
@@ -694,9 +694,9 @@ pub fn backward(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fast::kernels::tests::{lcg, on_threads};
+    use crate::fast::testing::{lcg, on_threads};
 
-    const SLOPE: f64 = crate::model::LEAKY_SLOPE;
+    const SLOPE: f64 = crate::activation::LEAKY_SLOPE;
 
     fn lrelu(z: f64) -> f64 {
         if z > 0.0 { z } else { SLOPE * z }

@@ -902,29 +902,7 @@ pub fn conv_input_grad(s: &ConvShape, w: &[f32], gz: &[f32], prec: Precision) ->
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
-
-    pub(in crate::fast) fn lcg(seed: u64, n: usize) -> Vec<f32> {
-        let mut s = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    /// `f()` on a pool of `threads` threads (results must not depend on the count).
-    pub(in crate::fast) fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .expect("thread pool")
-            .install(f)
-    }
+    use crate::fast::testing::{lcg, on_threads};
 
     /// Direct (six nested loops) convolution on channels-last data.
     pub(in crate::fast) fn conv_naive(x: &[f32], s: &ConvShape, w: &[f32], b: &[f32]) -> Vec<f32> {

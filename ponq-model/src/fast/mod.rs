@@ -21,6 +21,8 @@ pub mod decoders;
 pub mod kernels;
 pub mod ops;
 pub mod sparse;
+#[cfg(test)]
+mod testing;
 pub mod winograd;
 
 use burn::prelude::*;

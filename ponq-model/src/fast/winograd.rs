@@ -802,7 +802,8 @@ pub fn conv_weight_grad(x: &[f32], s: &ConvShape, gz: &[f32]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fast::kernels::tests::{conv_naive, lcg, on_threads};
+    use crate::fast::kernels::tests::conv_naive;
+    use crate::fast::testing::{lcg, on_threads};
 
     /// The direct convolution of [`super::super::kernels`]' tests (f64 sums), no bias.
     fn conv_ref(x: &[f32], s: &ConvShape, w: &[f32]) -> Vec<f64> {

@@ -1,0 +1,169 @@
+//! `ponq.infer`: the network on an SDF grid (the `ponq-infer` program).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+
+use burn::prelude::Device;
+use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict};
+use ponq_mesh::validity;
+use ponq_model::{PonqNet, PonqNetConfig};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+
+use crate::arrays::{grid3, mesh_out, ponq_out, tuple};
+use crate::errors::{Failure, bad, run, value_err, warn};
+use crate::options::{check_open, domain, open_arg, warn_invalid};
+
+/// The network of `model` (a `.bpk` file) or the shipped one, loaded once and kept.
+pub(crate) fn network(
+    model: Option<&Path>,
+    dev: &Device,
+) -> anyhow::Result<(PonqNet, PonqNetConfig)> {
+    static NETS: OnceLock<Mutex<HashMap<String, (PonqNet, PonqNetConfig)>>> = OnceLock::new();
+    let key = match model {
+        Some(p) => format!(
+            "file:{}",
+            std::fs::canonicalize(p)
+                .unwrap_or_else(|_| p.to_path_buf())
+                .display()
+        ),
+        None => format!("shipped:{:?}", std::env::var_os("PONQ_MODEL")),
+    };
+    let cache = NETS.get_or_init(Default::default);
+    if let Some(n) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return Ok(n.clone());
+    }
+    let loaded = match model {
+        Some(p) => ponq_model::weights::load(p, dev)?,
+        None => ponq_infer::shipped::load(dev)?,
+    };
+    cache
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, loaded.clone());
+    Ok(loaded)
+}
+
+/// Reconstructs a mesh from a signed distance grid with the PoNQ network: what the
+/// ``ponq-infer`` program does with the same options (the same mesh, bit for bit).
+///
+/// Args:
+///     sdf: 3D array (nx, ny, nz) of signed distances, negative inside, in the units of
+///         ``bounds``; any float dtype, C or Fortran order (a NumPy array, or anything
+///         ``numpy.asarray`` takes, e.g. ``tensor.numpy()``). Node (i, j, k) is at
+///         ``lo + (i, j, k) * h``; the cells must be cubes. At least 2 nodes per axis.
+///     bounds: the box spanned by the grid nodes, 6 floats
+///         ``(xmin, ymin, zmin, xmax, ymax, zmax)``; default ``[-1, 1]^3``.
+///     model: path of network weights (a ``.bpk`` file with its ``.json`` config beside it);
+///         default: the shipped model (``$PONQ_MODEL`` if set). Loaded once and kept.
+///     lite: PoNQ-lite: one point per cell (fewer vertices, the same sharp features).
+///     coarsen: merge 2x2x2 blocks of cells this many times (implies ``lite``).
+///     merge_smooth: adaptive PoNQ-lite: merge the points of each cell whose predicted
+///         normals agree within this many degrees (0 to 180); ``None`` or 0 keeps every point.
+///         Ignored with ``lite`` / ``coarsen``.
+///     open: open surface: ``True`` (threshold 0.35) or a threshold in [0, 1] on the quadric
+///         anisotropy; triangles away from sharp, planar-like quadrics are dropped and the
+///         output has a boundary. ``None`` / ``False``: closed output.
+///     refine: ``"auto"`` (refine the PoNQ against the grid's exact distances when the grid
+///         passes a check of a true signed distance), ``"on"`` or ``"off"``. Not with
+///         ``open``; ``"on"`` not with ``lite`` / ``coarsen``.
+///     threads: worker threads (a pool of that size for this call); default all cores.
+///     return_ponq: also return the PoNQ that was meshed (in the grid's coordinates).
+///     check: check the output's validity (closed, oriented, manifold, no
+///         self-intersection) as the program does; a failure gives a ``RuntimeWarning``.
+///
+/// Returns:
+///     ``(vertices, faces)``: float64 (V, 3) in the coordinates of ``bounds``, int64 (F, 3)
+///     (0-based, counter-clockwise seen from outside). With ``return_ponq=True`` a third
+///     element: a dict of float64 arrays ``points`` (M, 3), ``normals`` (M, 3),
+///     ``quadrics`` (M, 4, 4) (``[[A, -b], [-b^T, c]]``) and ``vstars`` (M, 3).
+///     When the network keeps no cell the mesh is empty and a ``UserWarning`` says so.
+///
+/// Raises:
+///     ValueError: a bad input (not rank 3, NaN or inf, fewer than 2 nodes per axis,
+///         non-cubic cells, no sign change, a bad option), with the program's message.
+///     RuntimeError: a failure of the computation.
+#[pyfunction]
+#[pyo3(
+    signature = (sdf, *, bounds=None, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), open=None, refine="auto", threads=None, return_ponq=false, check=true),
+    text_signature = "(sdf, *, bounds=None, model=None, lite=False, coarsen=0, merge_smooth=15.0, open=None, refine='auto', threads=None, return_ponq=False, check=True)"
+)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn infer<'py>(
+    py: Python<'py>,
+    sdf: &Bound<'py, PyAny>,
+    bounds: Option<Vec<f64>>,
+    model: Option<PathBuf>,
+    lite: bool,
+    coarsen: u32,
+    merge_smooth: Option<f64>,
+    open: Option<Bound<'py, PyAny>>,
+    refine: &str,
+    threads: Option<usize>,
+    return_ponq: bool,
+    check: bool,
+) -> PyResult<Bound<'py, PyTuple>> {
+    if threads == Some(0) {
+        return Err(value_err("threads must be at least 1"));
+    }
+    let open = open_arg(open.as_ref())?;
+    check_open(open)?;
+    let merge_smooth = merge_smooth.unwrap_or(0.0);
+    if !(0.0..=180.0).contains(&merge_smooth) {
+        return Err(value_err(format!(
+            "merge_smooth takes an angle in [0, 180] degrees, got {merge_smooth}"
+        )));
+    }
+    let refine: RefineMode = refine
+        .parse()
+        .map_err(|e| value_err(format!("invalid value '{refine}' for refine: {e}")))?;
+    let bounds = domain(bounds)?;
+    let grid = grid3(sdf)?;
+    if (lite || coarsen > 0) && refine == RefineMode::On {
+        return Err(value_err(
+            "refine='on' works on the full PoNQ: not with lite or coarsen",
+        ));
+    }
+    let opts = InferOptions {
+        bounds,
+        lite,
+        coarsen,
+        merge_smooth: (merge_smooth > 0.0).then_some(merge_smooth),
+        open,
+        refine: if lite || coarsen > 0 {
+            RefineMode::Off
+        } else {
+            refine
+        },
+        ..Default::default()
+    };
+    let (res, report) = run(py, threads, move || {
+        // The checks of `predict`, first, so that their errors are input errors.
+        Frame::of(&grid, opts.bounds).map_err(|e| Failure::Value(format!("{e:#}")))?;
+        let (min, max) = grid
+            .data
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        if !(min < 0.0 && max > 0.0) {
+            return bad(format!(
+                "the SDF has no sign change (values in [{min}, {max}]): the surface is empty; nothing to mesh"
+            ));
+        }
+        let dev = ponq_model::backend::cpu();
+        let (net, cfg) = network(model.as_deref(), &dev)?;
+        let p = predict(&net, cfg.encoder_layers, &grid, &opts, &dev, |_, _| {})?;
+        let res = finish(&p, &opts)?;
+        let report = (check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
+        Ok((res, report))
+    })?;
+    if let Some(m) = &res.message {
+        warn(py, "UserWarning", m)?;
+    }
+    warn_invalid(py, report.as_ref(), open.is_some())?;
+    let mut out = mesh_out(py, &res.mesh)?;
+    if return_ponq {
+        out.push(ponq_out(py, &res.ponq)?);
+    }
+    tuple(py, out)
+}

@@ -19,6 +19,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
+pub mod broken;
 pub mod dataset;
 pub mod error;
 pub mod fit;
@@ -27,6 +28,7 @@ pub mod normalize;
 pub mod occupancy;
 pub mod prep;
 pub mod refine;
+pub mod repair;
 pub mod sampling;
 pub mod sdf;
 pub mod synth;

@@ -74,6 +74,8 @@ def sdf(
     *,
     normalize: bool = True,
     return_transform: Literal[False] = False,
+    repair: bool = True,
+    return_report: Literal[False] = False,
     threads: Optional[int] = None,
 ) -> Float32Array: ...
 @overload
@@ -84,8 +86,22 @@ def sdf(
     *,
     normalize: bool = True,
     return_transform: Literal[True],
+    repair: bool = True,
+    return_report: Literal[False] = False,
     threads: Optional[int] = None,
 ) -> Tuple[Float32Array, Float64Array, float]: ...
+@overload
+def sdf(
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    res: int,
+    *,
+    normalize: bool = True,
+    return_transform: bool = False,
+    repair: Literal[True] = True,
+    return_report: Literal[True],
+    threads: Optional[int] = None,
+) -> Tuple[Any, ...]: ...
 def sample(
     vertices: npt.ArrayLike, faces: npt.ArrayLike, n: int, *, seed: int = 0
 ) -> Tuple[Float64Array, Float64Array]: ...

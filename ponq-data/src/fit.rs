@@ -41,6 +41,9 @@ pub struct FitOptions {
     pub lite: bool,
     /// Seed of the sampling and batches.
     pub seed: u64,
+    /// Repair the mesh first ([`crate::repair`]: a clean mesh is used unchanged; with
+    /// `open`, nothing is closed or removed).
+    pub repair: bool,
 }
 
 impl Default for FitOptions {
@@ -54,6 +57,7 @@ impl Default for FitOptions {
             open: None,
             lite: false,
             seed: 0,
+            repair: true,
         }
     }
 }
@@ -78,6 +82,8 @@ pub struct Fitted {
     pub final_loss: f64,
     /// Time spent sampling, fitting (Adam), building the PoNQ, meshing.
     pub times: [Duration; 4],
+    /// What the repair found and did (with [`FitOptions::repair`]).
+    pub report: Option<crate::repair::DefectReport>,
 }
 
 /// Corners of the `grid^3` cells of `[-1,1]^3` that hold at least one sample (unique).
@@ -212,6 +218,18 @@ pub fn fit_mesh(mesh: &TriMesh, opts: &FitOptions, progress: impl FnMut(usize)) 
         )));
     }
     let t0 = Instant::now();
+    let (repaired, report) = if opts.repair {
+        let ro = if opts.open.is_some() {
+            crate::repair::RepairOptions::open_surface()
+        } else {
+            crate::repair::RepairOptions::default()
+        };
+        let (m, r) = crate::repair::repair(mesh, &ro)?;
+        (Some(m), Some(r))
+    } else {
+        (None, None)
+    };
+    let mesh = repaired.as_ref().unwrap_or(mesh);
     let norm = Normalization::of(mesh)?;
     let m = norm.apply_mesh(mesh);
     let scale = opts.grid as f64 / 32.0;
@@ -293,5 +311,6 @@ pub fn fit_mesh(mesh: &TriMesh, opts: &FitOptions, progress: impl FnMut(usize)) 
         meshing,
         final_loss,
         times: [t_sample, t_fit, t_ponq, t_mesh],
+        report,
     })
 }

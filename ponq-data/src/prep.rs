@@ -25,6 +25,9 @@ pub struct PrepOptions {
     pub samples: usize,
     /// Sampling seed.
     pub seed: u64,
+    /// Repair meshes first ([`crate::repair`]; a clean mesh is used unchanged). `false`: the
+    /// mesh as it is, an open one signed by its winding number with a warning.
+    pub repair: bool,
 }
 
 impl Default for PrepOptions {
@@ -33,6 +36,7 @@ impl Default for PrepOptions {
             resolutions: vec![32, 64],
             samples: 1_000_000,
             seed: 0,
+            repair: true,
         }
     }
 }
@@ -42,8 +46,10 @@ impl Default for PrepOptions {
 pub struct Prepared {
     /// The record.
     pub record: ShapeRecord,
-    /// `Some(message)` for open or non-manifold input meshes.
+    /// `Some(message)` for open or non-manifold input meshes, and for repaired ones.
     pub warning: Option<String>,
+    /// What the repair found and did (meshes, with [`PrepOptions::repair`]).
+    pub report: Option<crate::repair::DefectReport>,
 }
 
 /// Exact analytic samples and their normals, in the `[-1,1]` frame.
@@ -63,6 +69,13 @@ pub fn prepare_mesh(
     if opts.resolutions.is_empty() {
         return Err(DataError::Invalid("no grid resolution requested".into()));
     }
+    let (repaired, report) = if opts.repair && analytic.is_none() {
+        let (m, r) = crate::repair::repair(mesh, &crate::repair::RepairOptions::default())?;
+        (Some(m), Some(r))
+    } else {
+        (None, None)
+    };
+    let mesh = repaired.as_ref().unwrap_or(mesh);
     let norm = Normalization::of(mesh)?;
     let m = norm.apply_mesh(mesh);
     let (points, normals) = match analytic {
@@ -76,9 +89,16 @@ pub fn prepare_mesh(
         return Err(DataError::Invalid("the mesh has no area to sample".into()));
     }
     let sdf = MeshSdf::new(&m)?;
-    let warning = sdf.is_open().then(|| {
+    let mut warning: Option<String> = sdf.is_open().then(|| {
         "the mesh is not closed: the SDF sign comes from the generalised winding number".into()
     });
+    if let Some(r) = report.as_ref().filter(|r| r.found_defects()) {
+        let line = r.to_string().replace('\n', "; ");
+        warning = Some(match warning {
+            Some(w) => format!("{line}; {w}"),
+            None => line,
+        });
+    }
     let mut record = ShapeRecord {
         samples: points.iter().map(|p| p.map(|x| x as f32)).collect(),
         normals: normals.iter().map(|p| p.map(|x| x as f32)).collect(),
@@ -91,7 +111,11 @@ pub fn prepare_mesh(
             .occupancy
             .insert(res, occupancy_from_samples(&points, res)?);
     }
-    Ok(Prepared { record, warning })
+    Ok(Prepared {
+        record,
+        warning,
+        report,
+    })
 }
 
 /// Exact boundary samples drawn for the exact distances of a generated shape (about 0.3 s;
@@ -139,6 +163,7 @@ pub fn prepare_synth(
     Ok(Prepared {
         record,
         warning: None,
+        report: None,
     })
 }
 

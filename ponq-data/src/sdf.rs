@@ -84,6 +84,9 @@ pub struct SdfGrid {
     /// every node (inside when `|w| > 1/2`), which is meaningful only for nearly closed
     /// meshes.
     pub open: bool,
+    /// With `open`: the nodes whose winding number's magnitude was within 1/4 of the inside
+    /// threshold 1/2 (their sign is a guess); 0 otherwise.
+    pub ambiguous_nodes: usize,
 }
 
 impl SdfGrid {
@@ -516,15 +519,17 @@ impl MeshSdf {
         let coords: Vec<f64> = (0..n1).map(|i| node_coord(i, res)).collect();
         let mut values = vec![0f32; n1 * n1 * n1];
         self.distances_into(&coords, &mut values, &progress);
-        if self.chain_closed {
+        let ambiguous_nodes = if self.chain_closed {
             self.sign_by_components(&coords, &mut values);
+            0
         } else {
-            self.sign_everywhere(&coords, &mut values);
-        }
+            self.sign_everywhere(&coords, &mut values)
+        };
         Ok(SdfGrid {
             res,
             values,
             open: self.open,
+            ambiguous_nodes,
         })
     }
 
@@ -655,20 +660,26 @@ impl MeshSdf {
     }
 
     /// Signs from the winding number at every node (meshes with a boundary).
-    fn sign_everywhere(&self, coords: &[f64], values: &mut [f32]) {
+    /// Returns the number of nodes whose `|w|` is within 1/4 of 1/2.
+    fn sign_everywhere(&self, coords: &[f64], values: &mut [f32]) -> usize {
         let n1 = coords.len();
         values
             .par_iter_mut()
             .with_min_len(256)
             .enumerate()
-            .for_each(|(a, v)| {
+            .map(|(a, v)| {
                 if *v > 0.0 {
                     let p = [coords[a / (n1 * n1)], coords[(a / n1) % n1], coords[a % n1]];
-                    if self.winding_number(p).abs() > 0.5 {
+                    let w = self.winding_number(p).abs();
+                    if w > 0.5 {
                         *v = -*v;
                     }
+                    usize::from((0.25..0.75).contains(&w))
+                } else {
+                    0
                 }
-            });
+            })
+            .sum()
     }
 
     /// Squared distance to and leaf-order index of the closest triangle; `hint` (a leaf-order

@@ -20,6 +20,7 @@ fn batch_prepares_skips_and_resumes() {
         resolutions: vec![8, 16],
         samples: 5000,
         seed: 1,
+        ..Default::default()
     };
     let s = run_batch(&jobs, &out, &opts, || {}).unwrap();
     assert_eq!(s.done, vec!["part".to_string()]);

@@ -22,6 +22,7 @@ fn synth_grids_agree_with_the_exact_surface() {
         resolutions: vec![res],
         samples: 300_000,
         seed: 0,
+        ..Default::default()
     };
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let mut checked_balls = 0;

@@ -38,6 +38,7 @@
 //! }
 //! ```
 
+pub mod broken;
 pub mod chart;
 pub mod evaluate;
 pub mod inputs;

@@ -1,9 +1,12 @@
-//! A mesh as the input of inference: normalised into the `[-1,1]` frame (bounding-box centre
-//! at the origin, diagonal 2), its exact signed distance grid computed as `ponq-prep sdf`
-//! does (`ponq_data::sdf`), and the transform that maps results back to its coordinates.
+//! A mesh as the input of inference: repaired (`ponq_data::repair`: any triangle soup in, the
+//! surface of the solid it describes out; a clean mesh is used as it is), normalised into the
+//! `[-1,1]` frame (bounding-box centre at the origin, diagonal 2), its exact signed distance
+//! grid computed as `ponq-prep sdf` does (`ponq_data::sdf`), and the transform that maps
+//! results back to its coordinates.
 
 use anyhow::{Context, Result, bail};
 use ponq_data::normalize::Normalization;
+use ponq_data::repair::{DefectReport, RepairOptions, repair};
 use ponq_data::sdf::MeshSdf;
 use ponq_mesh::TriMesh;
 use ponq_mesh::io::npy::Grid3;
@@ -18,21 +21,45 @@ pub struct MeshGrid {
     pub grid: Grid3,
     /// Input coordinates -> the grid's `[-1,1]` frame.
     pub normalization: Normalization,
-    /// The mesh is not a closed, consistently oriented surface: the sign follows the
-    /// generalised winding number.
+    /// The mesh (after the repair) is not a closed, consistently oriented surface: the sign
+    /// follows the generalised winding number node by node.
     pub open: bool,
+    /// What the repair found and did (`None` without the repair).
+    pub report: Option<DefectReport>,
 }
 
-/// Normalises `mesh` and computes its exact SDF grid with `res` cells per side.
-/// `progress(nodes_done)` reports the distance computation.
+/// How [`mesh_grid`] treats the mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshInput {
+    /// The output is an open surface (`--open`): an open mesh is welcome, and its repair
+    /// closes nothing and removes nothing.
+    pub open_surface: bool,
+    /// Repair the mesh first (the default). Without it a mesh that is not closed and
+    /// consistently oriented is an error unless `open_surface` (the behaviour before the
+    /// repair existed).
+    pub repair: bool,
+}
+
+impl Default for MeshInput {
+    fn default() -> Self {
+        Self {
+            open_surface: false,
+            repair: true,
+        }
+    }
+}
+
+/// Repairs (see [`MeshInput`]) and normalises `mesh`, then computes its exact SDF grid with
+/// `res` cells per side. `progress(nodes_done)` reports the distance computation.
 ///
 /// # Errors
-/// `res` outside [`RES_RANGE`], a mesh without faces or with a degenerate bounding box, and
-/// an open mesh unless `allow_open` (the open-surface path).
+/// `res` outside [`RES_RANGE`]; a mesh without faces, with non-finite coordinates or nothing
+/// left to reconstruct after the repair; without the repair, an open mesh unless
+/// `open_surface`.
 pub fn mesh_grid(
     mesh: &TriMesh,
     res: usize,
-    allow_open: bool,
+    input: MeshInput,
     progress: impl Fn(usize) + Sync,
 ) -> Result<MeshGrid> {
     if !RES_RANGE.contains(&res) {
@@ -43,22 +70,41 @@ pub fn mesh_grid(
         );
     }
     if mesh.faces.is_empty() {
-        bail!("the input mesh has no triangle");
+        bail!("the input mesh has no triangle: nothing to reconstruct");
     }
+    let (repaired, mut report) = if input.repair {
+        let opts = if input.open_surface {
+            RepairOptions::open_surface()
+        } else {
+            RepairOptions::default()
+        };
+        let (m, r) = repair(mesh, &opts).context("repairing the input mesh")?;
+        (Some(m), Some(r))
+    } else {
+        (None, None)
+    };
+    let mesh = repaired.as_ref().unwrap_or(mesh);
     let normalization = Normalization::of(mesh).context("normalising the input mesh")?;
     let m = normalization.apply_mesh(mesh);
     let sdf = MeshSdf::new(&m).context("preparing the input mesh's distance queries")?;
-    if sdf.is_open() && !allow_open {
+    if sdf.is_open() && !input.open_surface && !input.repair {
         let report = ponq_mesh::validity::check_topology(&m);
         bail!(
             "the input mesh is not a closed, consistently oriented surface ({report}): its inside \
-             is undefined. Repair it, or reconstruct it as an open surface with --open"
+             is undefined. Repair it (the default, without --no-repair), or reconstruct it as an \
+             open surface with --open"
         );
     }
     let g = sdf.grid(res, progress).context("computing the SDF grid")?;
+    if let Some(r) = &mut report
+        && g.open
+    {
+        r.ambiguous_node_share = Some(g.ambiguous_nodes as f64 / g.values.len() as f64);
+    }
     Ok(MeshGrid {
         grid: g.to_grid3(),
         normalization,
         open: g.open,
+        report,
     })
 }

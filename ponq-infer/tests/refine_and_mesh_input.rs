@@ -133,12 +133,23 @@ fn bad_mesh_inputs_and_flags_are_clear_errors() {
     open.faces.remove(0);
     io::write_mesh(d.join("open.obj"), &open).unwrap();
     let o = d.join("o.obj");
-    let (code, out) = run(&[os(&d.join("open.obj")), "-o".as_ref(), os(&o)]);
+    // Without the repair (the behaviour before it): an error that says what to do.
+    let (code, out) = run(&[
+        os(&d.join("open.obj")),
+        "--no-repair".as_ref(),
+        "-o".as_ref(),
+        os(&o),
+    ]);
     assert_eq!(code, Some(2), "{out}");
     assert!(
         out.contains("not a closed") && out.contains("--open"),
         "{out}"
     );
+    // By default the hole is closed, the report says so, and the output is valid.
+    let (code, out) = run(&[os(&d.join("open.obj")), "-o".as_ref(), os(&o)]);
+    assert_eq!(code, Some(0), "{out}");
+    assert!(out.contains("filled holes: 1"), "{out}");
+    assert!(validity::check(&io::read_mesh(&o).unwrap()).is_valid());
     // The documented open-surface path.
     let (code, out) = run(&[
         os(&d.join("open.obj")),

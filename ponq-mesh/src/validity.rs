@@ -91,6 +91,15 @@ impl ValidityReport {
     pub fn is_watertight(&self) -> bool {
         self.is_valid()
     }
+
+    /// True for a valid open surface (the programs' `--open` outputs): boundary edges are
+    /// expected, but no edge has three faces or more, every vertex's faces form one fan, and
+    /// no two faces cross (for a report of [`check_topology`], assumed).
+    pub fn is_valid_open_surface(&self) -> bool {
+        self.self_intersections == 0
+            && self.nonmanifold_edges == 0
+            && self.nonmanifold_vertices == 0
+    }
 }
 
 impl fmt::Display for ValidityReport {

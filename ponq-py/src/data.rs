@@ -13,8 +13,11 @@ use crate::options::{open_arg, warn_invalid};
 
 /// The exact signed distance grid of a triangle mesh: what ``ponq-prep sdf`` writes.
 ///
-/// The mesh is first normalised to the [-1, 1] convention (bounding-box centre at the
-/// origin, bounding-box diagonal 2) unless ``normalize=False``. The grid has
+/// The mesh is first repaired (``repair=True``: vertices within 1e-4 of the diagonal welded,
+/// degenerate and duplicate faces dropped, faces and parts oriented, holes closed, faces that
+/// separate no inside from an outside removed; a clean mesh is used unchanged), then
+/// normalised to the [-1, 1] convention (bounding-box centre at the origin, bounding-box
+/// diagonal 2) unless ``normalize=False``. The grid has
 /// ``(res+1)^3`` nodes spanning [-1, 1]^3, node (i, j, k) at ``-1 + 2 (i, j, k) / res``
 /// (C order: x slowest, z fastest); values are exact distances to the triangles, negative
 /// inside (the sign of the generalised winding number; an open mesh gives a
@@ -31,16 +34,21 @@ use crate::options::{open_arg, warn_invalid};
 ///         grid coordinates are ``(x - centre) * scale``, so a mesh reconstructed from the
 ///         grid maps back to the input's coordinates by ``v / scale + centre``
 ///         (``normalize=False``: centre 0, scale 1).
+///     repair: repair the mesh first (``False``: the program's ``--no-repair``, the mesh as
+///         it is).
+///     return_report: also return the defect report: a dict of what the repair found and
+///         did (the keys of ``ponq-prep sdf --json``).
 ///     threads: worker threads (a pool of that size for this call); default all cores.
 ///
 /// Returns:
-///     float32 array (res+1, res+1, res+1), or ``(grid, centre, scale)`` with
-///     ``return_transform=True``.
+///     float32 array (res+1, res+1, res+1); with ``return_transform=True`` followed by
+///     ``centre`` and ``scale``, with ``return_report=True`` by the report, in a tuple.
 #[pyfunction]
 #[pyo3(
-    signature = (vertices, faces, res, *, normalize=true, return_transform=false, threads=None),
-    text_signature = "(vertices, faces, res, *, normalize=True, return_transform=False, threads=None)"
+    signature = (vertices, faces, res, *, normalize=true, return_transform=false, repair=true, return_report=false, threads=None),
+    text_signature = "(vertices, faces, res, *, normalize=True, return_transform=False, repair=True, return_report=False, threads=None)"
 )]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn sdf<'py>(
     py: Python<'py>,
     vertices: &Bound<'py, PyAny>,
@@ -48,6 +56,8 @@ pub(crate) fn sdf<'py>(
     res: usize,
     normalize: bool,
     return_transform: bool,
+    repair: bool,
+    return_report: bool,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     if !(2..=1024).contains(&res) {
@@ -57,7 +67,17 @@ pub(crate) fn sdf<'py>(
     if mesh.faces.is_empty() {
         return Err(value_err("the mesh has no triangle"));
     }
-    let (grid, norm, open_report) = run(py, threads, move || {
+    if return_report && !repair {
+        return Err(value_err("return_report needs repair=True"));
+    }
+    let (grid, norm, open_report, defects) = run(py, threads, move || {
+        let (mesh, defects) = if repair {
+            let (m, r) =
+                ponq_data::repair::repair(&mesh, &ponq_data::repair::RepairOptions::default())?;
+            (m, Some(r))
+        } else {
+            (mesh, None)
+        };
         let (mesh, norm) = if normalize {
             let n = Normalization::of(&mesh)
                 .map_err(|e| Failure::Value(format!("normalising the mesh: {e}")))?;
@@ -76,7 +96,14 @@ pub(crate) fn sdf<'py>(
         let open = grid
             .open
             .then(|| validity::check_topology(&mesh).to_string());
-        Ok((grid, norm, open))
+        let defects = defects.map(|mut r| {
+            if grid.open {
+                r.ambiguous_node_share =
+                    Some(grid.ambiguous_nodes as f64 / grid.values.len() as f64);
+            }
+            r
+        });
+        Ok((grid, norm, open, defects))
     })?;
     if let Some(report) = open_report {
         warn(
@@ -91,20 +118,27 @@ pub(crate) fn sdf<'py>(
     }
     let n1 = res + 1;
     let g = PyArray1::from_vec(py, grid.values).reshape([n1, n1, n1])?;
-    if return_transform {
-        let centre = PyArray1::from_vec(py, norm.centre.to_vec());
-        Ok(tuple(
-            py,
-            vec![
-                g.into_any(),
-                centre.into_any(),
-                norm.scale.into_pyobject(py)?.into_any(),
-            ],
-        )?
-        .into_any())
-    } else {
-        Ok(g.into_any())
+    if !return_transform && !return_report {
+        return Ok(g.into_any());
     }
+    let mut items = vec![g.into_any()];
+    if return_transform {
+        items.push(PyArray1::from_vec(py, norm.centre.to_vec()).into_any());
+        items.push(norm.scale.into_pyobject(py)?.into_any());
+    }
+    if let Some(r) = defects.filter(|_| return_report) {
+        items.push(report_dict(py, &r)?);
+    }
+    Ok(tuple(py, items)?.into_any())
+}
+
+/// A defect report as a dict (the keys of its JSON form; `None` for a check not run).
+pub(crate) fn report_dict<'py>(
+    py: Python<'py>,
+    r: &ponq_data::repair::DefectReport,
+) -> PyResult<Bound<'py, PyAny>> {
+    let json = py.import("json")?;
+    json.call_method1("loads", (r.to_json(),))
 }
 
 /// Area-weighted random points on a mesh's surface with their face normals (the sampling of

@@ -41,10 +41,10 @@ pub(crate) fn check_open(open: Option<f64>) -> PyResult<()> {
 }
 
 /// Whether a mesh passes the programs' check: a closed mesh must be valid, an open surface
-/// needs no self-intersection and no non-manifold edge.
+/// needs no self-intersection and no non-manifold edge or vertex.
 fn passes(r: &ValidityReport, open: bool) -> bool {
     if open {
-        r.self_intersections == 0 && r.nonmanifold_edges == 0
+        r.is_valid_open_surface()
     } else {
         r.is_valid()
     }

@@ -238,6 +238,32 @@ def test_sdf_against_brute_force():
     assert g2.min() < 0 < g2.max()
 
 
+def test_sdf_repairs_broken_meshes_and_reports():
+    v, f = cube_mesh(0.55)
+    clean = ponq.sdf(v, f, 8)
+    # A soup with cracks, a flipped face, a duplicate the other way round and a missing face.
+    rng = np.random.default_rng(3)
+    sv = v[f.ravel()] + rng.uniform(-1e-7, 1e-7, size=(3 * len(f), 3))
+    sf = np.arange(3 * len(f)).reshape(-1, 3)
+    sf[2] = sf[2][::-1]
+    sf = np.vstack([sf[1:], sf[5][::-1]])
+    g, report = ponq.sdf(sv, sf, 8, return_report=True)
+    assert report["repaired"] and report["welded_vertices"] > 0
+    assert report["holes_filled"] == 1 and report["duplicate_faces"] == 1
+    assert set(report) >= {"boundary_edges", "self_intersecting_pairs", "ambiguous_node_share"}
+    # The sign is the clean cube's everywhere; the distances within the cracks' size.
+    np.testing.assert_array_equal(g < 0, clean < 0)
+    np.testing.assert_allclose(g, clean, atol=1e-5)
+    # Without the repair the mesh is taken as it is (open: a warning).
+    with pytest.warns(UserWarning):
+        ponq.sdf(sv, sf, 8, repair=False)
+    with pytest.raises(ValueError, match="return_report"):
+        ponq.sdf(sv, sf, 8, repair=False, return_report=True)
+    # Nothing to reconstruct.
+    with pytest.raises(ValueError, match="no volume"):
+        ponq.sdf(v[:3], [[0, 1, 2]], 8)
+
+
 def test_sdf_equals_ponq_prep(tmp_path):
     exe = binary("ponq-prep")
     out = tmp_path / "csg.npy"

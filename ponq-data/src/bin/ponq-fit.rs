@@ -46,6 +46,12 @@ struct Args {
     /// Seed of the sampling and mini-batches.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Use the mesh as it is, without the repair (by default it is repaired first: vertices
+    /// within 1e-4 of the diagonal welded, degenerate and duplicate faces dropped, faces and
+    /// parts oriented, holes closed and faces that separate no inside from an outside removed
+    /// (with --open: nothing closed or removed); a clean mesh is used unchanged).
+    #[arg(long)]
+    no_repair: bool,
     /// Print nothing but errors (no progress bar).
     #[arg(short, long)]
     quiet: bool,
@@ -74,10 +80,17 @@ fn run(a: &Args) -> Result<bool> {
         open: a.open,
         lite: a.lite,
         seed: a.seed,
+        repair: !a.no_repair,
         ..Default::default()
     };
     let fitted = fit_mesh(&mesh, &opts, |i| bar.set_position(i as u64))?;
     bar.finish_and_clear();
+    if let Some(r) = &fitted.report
+        && !a.quiet
+        && r.found_defects()
+    {
+        eprintln!("{r}");
+    }
     if let Some(p) = &a.save_ponq {
         io::npz::write_ponq(p, &fitted.ponq).context("writing the PoNQ file")?;
     }
@@ -89,7 +102,7 @@ fn run(a: &Args) -> Result<bool> {
     io::write_mesh(&a.output, &out).context("writing the output mesh")?;
     let report = validity::check(&fitted.meshing.mesh);
     let ok = if a.open.is_some() {
-        report.self_intersections == 0 && report.nonmanifold_edges == 0
+        report.is_valid_open_surface()
     } else {
         report.is_valid()
     };

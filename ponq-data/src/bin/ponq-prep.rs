@@ -1,7 +1,8 @@
 //! `ponq-prep`: turn meshes into PoNQ training / evaluation data.
 //!
 //! Subcommands: `sdf` (an exact signed distance grid as a `.npy` file), `meshes` and `synth`
-//! (dataset records, see `ponq_data::dataset`).
+//! (dataset records, see `ponq_data::dataset`), `break` (a broken copy of a mesh, to test the
+//! repair on).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -12,6 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::normalize::Normalization;
 use ponq_data::prep::{Job, MeshJob, PrepOptions, SynthJob, mesh_inputs, run_batch};
+use ponq_data::repair::{RepairOptions, repair};
 use ponq_data::sdf::signed_distance_grid;
 use ponq_data::synth::SynthOptions;
 use ponq_mesh::io;
@@ -43,6 +45,34 @@ enum Command {
     /// Generate procedural CAD-like shapes (seeds S..S+N) and prepare them like `meshes`,
     /// with their exact analytic surface samples: OUT/synth_SEED.npz.
     Synth(SynthArgs),
+    /// Write a broken copy of a mesh, one class of defect, seeded: what real collections are
+    /// full of (triangle soups, cracks, flipped faces and parts, duplicates, holes, nested
+    /// shells, overlapping copies, fins), to test and measure the repair on.
+    Break(BreakArgs),
+}
+
+#[derive(Args, Debug)]
+struct BreakArgs {
+    /// Input mesh (.obj, .ply, .off, .stl): a closed solid.
+    mesh: PathBuf,
+    /// Output mesh (.obj, .ply, .off).
+    #[arg(short, long, value_name = "BROKEN.obj")]
+    output: PathBuf,
+    /// The defect: soup (one vertex triple per face), cracks (a soup with its vertices moved
+    /// apart by up to 1e-5 of the diagonal), flip10 / flip50 (10% / 50% of the faces flipped),
+    /// flip-part (the largest part flipped whole), duplicates (5% of the faces duplicated with
+    /// the opposite orientation), holes (faces no longer than a grid cell removed, one per
+    /// hole), nested-shell (a sphere inside the solid, facing out), overlap (a copy moved by a
+    /// quarter of the bounding box), fins (triangles half a cell tall on edges).
+    #[arg(long, value_name = "CLASS")]
+    defect: ponq_data::broken::Defect,
+    /// Cells per side of the grid the copy is meant for: a cell is the diagonal / RES (the
+    /// size of holes and fins).
+    #[arg(long, value_name = "RES", default_value_t = 64)]
+    res: usize,
+    /// Seed of the random choices.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(Args, Debug)]
@@ -62,6 +92,9 @@ struct BatchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Use the meshes as they are, without the repair (see `ponq-prep sdf --help`).
+    #[arg(long)]
+    no_repair: bool,
     /// Print nothing but errors (no progress bar, no summary).
     #[arg(short, long)]
     quiet: bool,
@@ -105,7 +138,17 @@ struct SdfArgs {
     /// default the mesh is normalised to bounding-box centre 0 and diagonal 2.
     #[arg(long)]
     no_normalize: bool,
-    /// Print nothing but errors and warnings (no progress bar, no summary).
+    /// Use the mesh as it is (the behaviour before the repair existed: an open mesh is signed
+    /// by its winding number with a warning). By default a mesh is repaired first: vertices
+    /// within 1e-4 of the diagonal welded, degenerate and duplicate faces dropped, faces and
+    /// parts oriented, holes closed, faces that separate no inside from an outside removed;
+    /// a clean mesh is used unchanged.
+    #[arg(long)]
+    no_repair: bool,
+    /// Also write the defect report as a JSON object to this file.
+    #[arg(long, value_name = "REPORT.json")]
+    json: Option<PathBuf>,
+    /// Print nothing but errors and warnings (no progress bar, no summary, no defect report).
     #[arg(short, long)]
     quiet: bool,
 }
@@ -152,6 +195,23 @@ fn run_sdf(a: &SdfArgs) -> Result<()> {
     check_output_dir(&a.output)?;
     let t0 = Instant::now();
     let mesh = read_input_mesh(&a.mesh)?;
+    let mesh = if a.no_repair {
+        mesh
+    } else {
+        let (m, report) = repair(&mesh, &RepairOptions::default())
+            .with_context(|| format!("repairing {}", a.mesh.display()))?;
+        if !a.quiet && report.found_defects() {
+            eprintln!("{report}");
+        }
+        if let Some(path) = &a.json {
+            std::fs::write(path, report.to_json() + "\n")
+                .with_context(|| format!("writing the defect report {}", path.display()))?;
+        }
+        m
+    };
+    if a.no_repair && a.json.is_some() {
+        bail!("--json writes the repair's report: not with --no-repair");
+    }
     let mesh = if a.no_normalize {
         mesh
     } else {
@@ -241,6 +301,7 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
         resolutions: b.res.clone(),
         samples: b.samples,
         seed: b.sample_seed,
+        repair: !b.no_repair,
     };
     let bar = if b.quiet {
         ProgressBar::hidden()
@@ -272,6 +333,34 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
     Ok(())
 }
 
+fn run_break(a: &BreakArgs) -> Result<()> {
+    if !RES_RANGE.contains(&a.res) {
+        bail!(
+            "--res must be in {}..={}, got {}",
+            RES_RANGE.start(),
+            RES_RANGE.end(),
+            a.res
+        );
+    }
+    check_output_dir(&a.output)?;
+    let mesh = read_input_mesh(&a.mesh)?;
+    let (lo, hi) = mesh.bounding_box().context("the mesh has no vertex")?;
+    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+    let broken = ponq_data::broken::break_mesh(&mesh, a.defect, a.seed, diag / a.res as f64)
+        .with_context(|| format!("breaking {}", a.mesh.display()))?;
+    io::write_mesh(&a.output, &broken).context("writing the broken copy")?;
+    println!(
+        "{}: {} ({} vertices, {} faces; the input had {}, {})",
+        a.output.display(),
+        a.defect,
+        broken.vertices.len(),
+        broken.faces.len(),
+        mesh.vertices.len(),
+        mesh.faces.len()
+    );
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
@@ -288,6 +377,7 @@ fn main() -> ExitCode {
                 let jobs: Vec<MeshJob> = files.into_iter().map(MeshJob).collect();
                 run_batch_cmd(&jobs, &a.batch)
             }),
+        Command::Break(a) => run_break(a),
         Command::Synth(a) => {
             let synth = SynthOptions {
                 mesh_resolution: a.mesh_resolution,

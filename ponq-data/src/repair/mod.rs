@@ -425,7 +425,8 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
         if kept.is_empty() {
             return Err(DataError::Invalid(
                 "no face of the mesh separates an inside from an outside: it encloses no volume \
-                 (for a surface, reconstruct it as an open surface)"
+                 (a surface has no inside: reconstruct it as an open surface, --open in the \
+                 programs, open=True in Python)"
                     .into(),
             ));
         }

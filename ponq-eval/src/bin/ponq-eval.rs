@@ -33,6 +33,14 @@ enum Cmd {
     /// resolution; writes OUT/per_shape.csv, OUT/summary.md (the paper's table layout),
     /// OUT/report.md with renders in OUT/renders/. Resumable: rerun the same command.
     Run(RunArgs),
+    /// Broken copies side by side with the clean meshes: every mesh of DATA through
+    /// `ponq-infer MESH --res RES`'s path (repair, SDF, network, meshing, refinement) as it
+    /// is and as one broken copy per defect class (`ponq-prep break --help`), each output
+    /// compared with the clean mesh (with the union of the two copies for `overlap`).
+    /// Writes OUT/per_copy.csv (resumable: rerun the same command) and OUT/summary.md (per
+    /// class: valid outputs, F1 / NC / EF1 beside the clean copies' of the same shapes, the
+    /// mean and worst F1 loss, time).
+    Broken(BrokenArgs),
     /// Marching cubes baseline: the zero level set of an SDF grid (.npy, nodes spanning the
     /// [-1,1]^3 box, negative inside, as written by `ponq-prep sdf`).
     Mc {
@@ -86,6 +94,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Run(a) => run_split(a),
+        Cmd::Broken(a) => run_broken(a),
         Cmd::Mc { sdf, output } => {
             let g = io::npy::read_npy_grid(&sdf).context("reading the SDF grid")?;
             let t = std::time::Instant::now();
@@ -276,6 +285,147 @@ struct RunArgs {
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct BrokenArgs {
+    /// A folder of clean meshes (searched recursively; the first folder below it is a
+    /// shape's group in the CSV).
+    data: PathBuf,
+    /// Cells per side of the SDF grid (also the size of holes and fins: a cell).
+    #[arg(long, default_value_t = 64)]
+    res: usize,
+    /// Defect classes, comma-separated, or `all`.
+    #[arg(long, value_delimiter = ',', default_value = "all")]
+    defects: Vec<String>,
+    /// Seed of the broken copies.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Surface and sharp-edge samples per mesh for the metrics.
+    #[arg(long, default_value_t = 100_000)]
+    samples: usize,
+    /// Only the first N meshes (sorted by name).
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Network weights [default: the shipped model].
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Report folder.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn run_broken(a: BrokenArgs) -> Result<()> {
+    use indicatif::{ProgressBar, ProgressStyle};
+    use ponq_data::broken::Defect;
+    use ponq_eval::broken::{CopyRow, evaluate_copies, summary_markdown};
+    use std::io::Write;
+    if !(2..=512).contains(&a.res) {
+        bail!("--res takes a resolution in 2..=512, got {}", a.res);
+    }
+    if a.samples == 0 {
+        bail!("--samples must be positive");
+    }
+    let defects: Vec<Defect> = if a.defects.iter().any(|d| d == "all") {
+        Defect::ALL.to_vec()
+    } else {
+        a.defects
+            .iter()
+            .map(|d| d.parse::<Defect>().map_err(anyhow::Error::msg))
+            .collect::<Result<_>>()?
+    };
+    let (mut shapes, _) = ponq_eval::inputs::inputs(&a.data, None)?;
+    shapes.retain(|(_, p)| ponq_mesh::io::MeshFormat::from_path(p).is_some());
+    if let Some(n) = a.limit {
+        shapes.truncate(n);
+    }
+    if shapes.is_empty() {
+        bail!("no mesh (.obj, .ply, .off, .stl) in {}", a.data.display());
+    }
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("creating {}", a.output.display()))?;
+    let csv = a.output.join("per_copy.csv");
+    let mut rows: Vec<CopyRow> = match std::fs::read_to_string(&csv) {
+        Ok(text) => text.lines().skip(1).filter_map(CopyRow::parse).collect(),
+        Err(_) => Vec::new(),
+    };
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&csv)
+        .with_context(|| format!("opening {}", csv.display()))?;
+    if rows.is_empty() {
+        writeln!(file, "{}", CopyRow::HEADER)?;
+    }
+    let device = ponq_model::backend::cpu();
+    let (net, cfg) = match &a.model {
+        Some(p) => ponq_model::weights::load(p, &device)?,
+        None => ponq_infer::shipped::load(&device)?,
+    };
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((shapes.len() * (defects.len() + 1)) as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("copies {bar:40} {pos}/{len} [{elapsed} < {eta}] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    for (id, path) in &shapes {
+        let group = ponq_eval::inputs::group_of(&a.data, path);
+        bar.set_message(id.clone());
+        let have: Vec<String> = rows
+            .iter()
+            .filter(|r| &r.shape == id)
+            .map(|r| r.copy.clone())
+            .collect();
+        bar.inc(have.len() as u64);
+        let result = evaluate_copies(
+            id,
+            &group,
+            path,
+            a.res,
+            &defects,
+            a.seed,
+            a.samples,
+            &net,
+            cfg.encoder_layers,
+            &device,
+            &|copy| have.iter().any(|h| h == copy),
+            |row| {
+                writeln!(file, "{}", row.csv())?;
+                file.flush()?;
+                rows.push(row);
+                bar.inc(1);
+                Ok(())
+            },
+        );
+        if let Err(e) = result {
+            bar.suspend(|| eprintln!("skipped {id}: {e:#}"));
+        }
+    }
+    bar.finish_and_clear();
+    let table = summary_markdown(&rows);
+    let md = a.output.join("summary.md");
+    std::fs::write(
+        &md,
+        format!(
+            "# Broken copies at {}^3 (seed {})\n\n{} meshes of {}.\n\n{table}",
+            a.res + 1,
+            a.seed,
+            shapes.len(),
+            a.data.display()
+        ),
+    )
+    .with_context(|| format!("writing {}", md.display()))?;
+    if !a.quiet {
+        print!("{table}");
+        println!("{}: per copy; {}: this table", csv.display(), md.display());
+    }
+    Ok(())
 }
 
 fn run_split(a: RunArgs) -> Result<()> {

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
-use ponq_infer::mesh_input::mesh_grid;
+use ponq_infer::mesh_input::{MeshInput, mesh_grid};
 use ponq_infer::{InferOptions, RefineMode, finish, predict, shipped};
 use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::mesher::MeshingOptions;
@@ -42,6 +42,18 @@ struct Args {
     /// `ponq-prep sdf` + `ponq-infer` on its grid would) instead of the input's coordinates.
     #[arg(long)]
     normalized: bool,
+    /// Mesh input only: use the mesh as it is, without the repair (the behaviour before it
+    /// existed: a mesh that is not closed and consistently oriented is an error unless
+    /// --open). By default a mesh is repaired first: vertices within 1e-4 of the diagonal
+    /// welded, degenerate and duplicate faces dropped, faces and parts oriented, holes
+    /// closed, faces that separate no inside from an outside (internal faces, nested shells,
+    /// fins, overlaps) removed; a clean mesh is used unchanged. The defect report says what
+    /// was found and done.
+    #[arg(long)]
+    no_repair: bool,
+    /// Mesh input only: also write the defect report as a JSON object to this file.
+    #[arg(long, value_name = "REPORT.json")]
+    json: Option<PathBuf>,
     /// Refine the network's PoNQ against the grid's exact distances (each node near the
     /// surface gives a surface sample along the first mesh's directions; the quadrics are
     /// refitted to them and the PoNQ meshed again, a few rounds, a round kept only if its
@@ -184,8 +196,13 @@ fn run(args: &Args) -> Result<Outcome> {
     if mesh_input && args.mesher.bounds.is_some() {
         bail!("--bounds is for SDF grids: a mesh input is normalised into [-1,1]^3");
     }
-    if !mesh_input && (args.res.is_some() || args.normalized) {
-        bail!("--res and --normalized are for a mesh input (.obj, .ply, .off, .stl)");
+    if !mesh_input
+        && (args.res.is_some() || args.normalized || args.no_repair || args.json.is_some())
+    {
+        bail!(
+            "--res, --normalized, --no-repair and --json are for a mesh input (.obj, .ply, .off, \
+             .stl)"
+        );
     }
     if !args.input.exists() {
         bail!(
@@ -204,11 +221,22 @@ fn run(args: &Args) -> Result<Outcome> {
             "sdf {bar:30} {percent:>3}% of {len} nodes [{elapsed} < {eta}]",
         );
         pb.set_length(((res + 1) as u64).pow(3));
-        let g = mesh_grid(&mesh, res, args.open.is_some(), |n| {
-            pb.set_position(n as u64)
-        })
-        .with_context(|| format!("the input mesh {}", args.input.display()))?;
+        let input = MeshInput {
+            open_surface: args.open.is_some(),
+            repair: !args.no_repair,
+        };
+        let g = mesh_grid(&mesh, res, input, |n| pb.set_position(n as u64))
+            .with_context(|| format!("the input mesh {}", args.input.display()))?;
         pb.finish_and_clear();
+        if let Some(r) = &g.report {
+            if !args.quiet && (r.found_defects() || r.ambiguous_node_share.is_some()) {
+                eprintln!("{r}");
+            }
+            if let Some(path) = &args.json {
+                std::fs::write(path, r.to_json() + "\n")
+                    .with_context(|| format!("writing the defect report {}", path.display()))?;
+            }
+        }
         if g.open && !args.quiet {
             eprintln!(
                 "note: the input mesh is open; the grid's sign follows its generalised winding \
@@ -372,7 +400,7 @@ fn run(args: &Args) -> Result<Outcome> {
             if args.open.is_some() {
                 // An open surface passes with boundary edges (and the vertices on them).
                 println!(
-                    "validity (open surface: boundary edges expected; needs no self-intersection, no non-manifold edge): {r}"
+                    "validity (open surface: boundary edges expected; needs no self-intersection, no non-manifold edge or vertex): {r}"
                 );
             } else {
                 println!("validity: {r}");
@@ -383,7 +411,7 @@ fn run(args: &Args) -> Result<Outcome> {
         None => Outcome::Valid,
         Some(r) => {
             let ok = if args.open.is_some() {
-                r.self_intersections == 0 && r.nonmanifold_edges == 0
+                r.is_valid_open_surface()
             } else {
                 r.is_valid()
             };

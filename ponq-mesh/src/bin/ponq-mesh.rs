@@ -201,7 +201,7 @@ fn run(args: &Args) -> Result<bool> {
             if args.open.is_some() {
                 // An open surface passes with boundary edges (and the vertices on them).
                 println!(
-                    "validity (open surface: boundary edges expected; needs no self-intersection, no non-manifold edge): {r} (checked in {:.1} ms)",
+                    "validity (open surface: boundary edges expected; needs no self-intersection, no non-manifold edge or vertex): {r} (checked in {:.1} ms)",
                     ms(*d)
                 );
             } else {
@@ -214,7 +214,7 @@ fn run(args: &Args) -> Result<bool> {
         Some((r, _)) => {
             if args.open.is_some() {
                 // Open meshes have boundary edges by design.
-                r.self_intersections == 0 && r.nonmanifold_edges == 0
+                r.is_valid_open_surface()
             } else if args.no_manifold || args.authors_mesher {
                 // Without the repair, non-manifold edges/vertices are expected (as in the
                 // authors' mesher); the surface must still be embedded.

@@ -69,13 +69,15 @@ pub fn prepare_mesh(
     if opts.resolutions.is_empty() {
         return Err(DataError::Invalid("no grid resolution requested".into()));
     }
-    let (repaired, report) = if opts.repair && analytic.is_none() {
-        let (m, r) = crate::repair::repair(mesh, &crate::repair::RepairOptions::default())?;
-        (Some(m), Some(r))
+    let repaired = if opts.repair && analytic.is_none() {
+        Some(crate::repair::repair_with_solid(
+            mesh,
+            &crate::repair::RepairOptions::default(),
+        )?)
     } else {
-        (None, None)
+        None
     };
-    let mesh = repaired.as_ref().unwrap_or(mesh);
+    let mesh = repaired.as_ref().map_or(mesh, |r| &r.mesh);
     let norm = Normalization::of(mesh)?;
     let m = norm.apply_mesh(mesh);
     let (points, normals) = match analytic {
@@ -89,6 +91,12 @@ pub fn prepare_mesh(
         return Err(DataError::Invalid("the mesh has no area to sample".into()));
     }
     let sdf = MeshSdf::new(&m)?;
+    // Where the repair removed faces, the closed surface they came from gives the sign.
+    let solid = match repaired.as_ref().and_then(|r| r.solid.as_ref()) {
+        Some(s) => Some(MeshSdf::new(&norm.apply_mesh(s))?),
+        None => None,
+    };
+    let report = repaired.map(|r| r.report);
     let mut warning: Option<String> = sdf.is_open().then(|| {
         "the mesh is not closed: the SDF sign comes from the generalised winding number".into()
     });
@@ -105,7 +113,7 @@ pub fn prepare_mesh(
         ..Default::default()
     };
     for &res in &opts.resolutions {
-        let g = sdf.grid(res, |_| {})?;
+        let g = sdf.grid_signed_by(solid.as_ref().unwrap_or(&sdf), res, |_| {})?;
         record.sdf.insert(res, g.values);
         record
             .occupancy

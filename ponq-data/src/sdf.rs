@@ -510,6 +510,24 @@ impl MeshSdf {
     /// # Errors
     /// `res` outside `1..=MAX_RES`.
     pub fn grid(&self, res: usize, progress: impl Fn(usize) + Sync) -> Result<SdfGrid> {
+        self.grid_signed_by(self, res, progress)
+    }
+
+    /// [`MeshSdf::grid`] with the distances to this mesh and the sign of `solid`'s
+    /// generalised winding number (`|w| > 1/2`): for a surface cut out of a closed one (the
+    /// repair's output without the faces that separate nothing, whose crossings may leave
+    /// cracks) signed by the closed surface it came from, by components when that one is
+    /// closed. The two meshes must bound the same solid: nodes joined by a grid edge that
+    /// misses this mesh (by the distances) are given one sign.
+    ///
+    /// # Errors
+    /// As [`MeshSdf::grid`].
+    pub fn grid_signed_by(
+        &self,
+        solid: &MeshSdf,
+        res: usize,
+        progress: impl Fn(usize) + Sync,
+    ) -> Result<SdfGrid> {
         if !(1..=MAX_RES).contains(&res) {
             return Err(DataError::Invalid(format!(
                 "grid resolution {res} is outside 1..={MAX_RES}"
@@ -519,18 +537,41 @@ impl MeshSdf {
         let coords: Vec<f64> = (0..n1).map(|i| node_coord(i, res)).collect();
         let mut values = vec![0f32; n1 * n1 * n1];
         self.distances_into(&coords, &mut values, &progress);
-        let ambiguous_nodes = if self.chain_closed {
-            self.sign_by_components(&coords, &mut values);
-            0
+        // The sign comes from `solid`, by its own distances (the components join nodes across
+        // edges that miss `solid`'s faces); then it is put on this mesh's distances.
+        let ambiguous_nodes = if std::ptr::eq(self, solid) {
+            solid.sign(&coords, &mut values)
         } else {
-            self.sign_everywhere(&coords, &mut values)
+            let mut own = vec![0f32; values.len()];
+            solid.distances_into(&coords, &mut own, &|_| {});
+            let ambiguous = solid.sign(&coords, &mut own);
+            values
+                .par_iter_mut()
+                .zip(own.par_iter())
+                .for_each(|(v, &s)| {
+                    if s < 0.0 {
+                        *v = -v.abs();
+                    }
+                });
+            ambiguous
         };
         Ok(SdfGrid {
             res,
             values,
-            open: self.open,
+            open: solid.open,
             ambiguous_nodes,
         })
+    }
+
+    /// Negates the unsigned distances `values` at the nodes inside (by components for a
+    /// closed chain, else node by node); returns the nodes with an ambiguous winding number.
+    fn sign(&self, coords: &[f64], values: &mut [f32]) -> usize {
+        if self.chain_closed {
+            self.sign_by_components(coords, values);
+            0
+        } else {
+            self.sign_everywhere(coords, values)
+        }
     }
 
     /// Unsigned distances at every node (parallel over `x` slabs, serpentine warm starts).

@@ -7,7 +7,7 @@
 
 use ponq_data::broken::{Defect, break_mesh};
 use ponq_data::normalize::Normalization;
-use ponq_data::repair::{RepairOptions, repair};
+use ponq_data::repair::{RepairOptions, repair, repair_with_solid};
 use ponq_data::sdf::{MeshSdf, SdfGrid};
 use ponq_mesh::{TriMesh, io, validity};
 
@@ -75,13 +75,15 @@ fn every_defect_class_gives_back_the_solid() {
         for defect in Defect::ALL {
             // In the normalised frame the diagonal is 2: a cell is 2 / RES.
             let broken = break_mesh(&clean_n, defect, 7, 2.0 / RES as f64).unwrap();
-            let (fixed, report) = repair(&broken, &RepairOptions::default()).unwrap();
+            let repaired = repair_with_solid(&broken, &RepairOptions::default()).unwrap();
+            let (fixed, report) = (repaired.mesh.clone(), repaired.report.clone());
             // An exactly welded soup of a clean part is clean: it is used as it is.
             if defect != Defect::Soup {
                 assert!(report.repaired, "{name} {defect}: {report}");
                 assert!(report.found_defects(), "{name} {defect}: {report}");
             }
-            let got = grid(&fixed);
+            // Distances to the repaired surface, the sign of the surface it was cut from.
+            let got = repaired.grid(|m| m.clone(), RES, |_| {}).unwrap();
             let (signs, worst) = if defect == Defect::Overlap {
                 let w = SdfGrid {
                     values: union_values.clone(),

@@ -6,7 +6,7 @@
 
 use anyhow::{Context, Result, bail};
 use ponq_data::normalize::Normalization;
-use ponq_data::repair::{DefectReport, RepairOptions, repair};
+use ponq_data::repair::{DefectReport, RepairOptions, repair_with_solid};
 use ponq_data::sdf::MeshSdf;
 use ponq_mesh::TriMesh;
 use ponq_mesh::io::npy::Grid3;
@@ -72,30 +72,33 @@ pub fn mesh_grid(
     if mesh.faces.is_empty() {
         bail!("the input mesh has no triangle: nothing to reconstruct");
     }
-    let (repaired, mut report) = if input.repair {
-        let opts = if input.open_surface {
-            RepairOptions::open_surface()
-        } else {
-            RepairOptions::default()
-        };
-        let (m, r) = repair(mesh, &opts).context("repairing the input mesh")?;
-        (Some(m), Some(r))
+    let opts = if input.open_surface {
+        RepairOptions::open_surface()
     } else {
-        (None, None)
+        RepairOptions::default()
     };
-    let mesh = repaired.as_ref().unwrap_or(mesh);
-    let normalization = Normalization::of(mesh).context("normalising the input mesh")?;
-    let m = normalization.apply_mesh(mesh);
-    let sdf = MeshSdf::new(&m).context("preparing the input mesh's distance queries")?;
-    if sdf.is_open() && !input.open_surface && !input.repair {
-        let report = ponq_mesh::validity::check_topology(&m);
-        bail!(
-            "the input mesh is not a closed, consistently oriented surface ({report}): its inside \
-             is undefined. Repair it (the default, without --no-repair), or reconstruct it as an \
-             open surface with --open"
-        );
-    }
-    let g = sdf.grid(res, progress).context("computing the SDF grid")?;
+    let (g, normalization, mut report) = if input.repair {
+        let r = repair_with_solid(mesh, &opts).context("repairing the input mesh")?;
+        let normalization = Normalization::of(&r.mesh).context("normalising the input mesh")?;
+        let g = r
+            .grid(|m| normalization.apply_mesh(m), res, progress)
+            .context("computing the SDF grid")?;
+        (g, normalization, Some(r.report))
+    } else {
+        let normalization = Normalization::of(mesh).context("normalising the input mesh")?;
+        let m = normalization.apply_mesh(mesh);
+        let sdf = MeshSdf::new(&m).context("preparing the input mesh's distance queries")?;
+        if sdf.is_open() && !input.open_surface {
+            let report = ponq_mesh::validity::check_topology(&m);
+            bail!(
+                "the input mesh is not a closed, consistently oriented surface ({report}): its \
+                 inside is undefined. Repair it (the default, without --no-repair), or \
+                 reconstruct it as an open surface with --open"
+            );
+        }
+        let g = sdf.grid(res, progress).context("computing the SDF grid")?;
+        (g, normalization, None)
+    };
     if let Some(r) = &mut report
         && g.open
     {

@@ -71,28 +71,31 @@ pub(crate) fn sdf<'py>(
         return Err(value_err("return_report needs repair=True"));
     }
     let (grid, norm, open_report, defects) = run(py, threads, move || {
-        let (mesh, defects) = if repair {
-            let (m, r) =
-                ponq_data::repair::repair(&mesh, &ponq_data::repair::RepairOptions::default())?;
-            (m, Some(r))
+        let repaired = if repair {
+            Some(ponq_data::repair::repair_with_solid(
+                &mesh,
+                &ponq_data::repair::RepairOptions::default(),
+            )?)
         } else {
-            (mesh, None)
+            None
         };
-        let (mesh, norm) = if normalize {
-            let n = Normalization::of(&mesh)
-                .map_err(|e| Failure::Value(format!("normalising the mesh: {e}")))?;
-            (n.apply_mesh(&mesh), n)
+        let source = repaired.as_ref().map_or(&mesh, |r| &r.mesh);
+        let norm = if normalize {
+            Normalization::of(source)
+                .map_err(|e| Failure::Value(format!("normalising the mesh: {e}")))?
         } else {
-            (
-                mesh,
-                Normalization {
-                    centre: [0.0; 3],
-                    scale: 1.0,
-                },
-            )
+            Normalization {
+                centre: [0.0; 3],
+                scale: 1.0,
+            }
         };
-        let grid = ponq_data::sdf::signed_distance_grid(&mesh, res, |_| {})
-            .map_err(|e| Failure::from(anyhow::Error::from(e).context("computing the SDF")))?;
+        let mesh = norm.apply_mesh(source);
+        let grid = match &repaired {
+            Some(r) => r.grid(|m| norm.apply_mesh(m), res, |_| {}),
+            None => ponq_data::sdf::signed_distance_grid(&mesh, res, |_| {}),
+        }
+        .map_err(|e| Failure::from(anyhow::Error::from(e).context("computing the SDF")))?;
+        let defects = repaired.map(|r| r.report);
         let open = grid
             .open
             .then(|| validity::check_topology(&mesh).to_string());

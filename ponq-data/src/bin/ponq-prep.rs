@@ -13,7 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::normalize::Normalization;
 use ponq_data::prep::{Job, MeshJob, PrepOptions, SynthJob, mesh_inputs, run_batch};
-use ponq_data::repair::{RepairOptions, repair};
+use ponq_data::repair::{RepairOptions, repair_with_solid};
 use ponq_data::sdf::signed_distance_grid;
 use ponq_data::synth::SynthOptions;
 use ponq_mesh::io;
@@ -195,36 +195,41 @@ fn run_sdf(a: &SdfArgs) -> Result<()> {
     check_output_dir(&a.output)?;
     let t0 = Instant::now();
     let mesh = read_input_mesh(&a.mesh)?;
-    let mesh = if a.no_repair {
-        mesh
-    } else {
-        let (m, report) = repair(&mesh, &RepairOptions::default())
-            .with_context(|| format!("repairing {}", a.mesh.display()))?;
-        if !a.quiet && report.found_defects() {
-            eprintln!("{report}");
-        }
-        if let Some(path) = &a.json {
-            std::fs::write(path, report.to_json() + "\n")
-                .with_context(|| format!("writing the defect report {}", path.display()))?;
-        }
-        m
-    };
     if a.no_repair && a.json.is_some() {
         bail!("--json writes the repair's report: not with --no-repair");
     }
-    let mesh = if a.no_normalize {
-        mesh
+    let repaired = if a.no_repair {
+        None
     } else {
-        let norm = Normalization::of(&mesh)
-            .with_context(|| format!("normalising {}", a.mesh.display()))?;
+        let r = repair_with_solid(&mesh, &RepairOptions::default())
+            .with_context(|| format!("repairing {}", a.mesh.display()))?;
+        if !a.quiet && r.report.found_defects() {
+            eprintln!("{}", r.report);
+        }
+        if let Some(path) = &a.json {
+            std::fs::write(path, r.report.to_json() + "\n")
+                .with_context(|| format!("writing the defect report {}", path.display()))?;
+        }
+        Some(r)
+    };
+    let mesh = repaired.as_ref().map_or(&mesh, |r| &r.mesh);
+    let norm = if a.no_normalize {
+        Normalization {
+            centre: [0.0; 3],
+            scale: 1.0,
+        }
+    } else {
+        let norm =
+            Normalization::of(mesh).with_context(|| format!("normalising {}", a.mesh.display()))?;
         if !a.quiet {
             println!(
                 "normalised: centre {:?}, scale {:.6e} (x -> (x - centre) * scale)",
                 norm.centre, norm.scale
             );
         }
-        norm.apply_mesh(&mesh)
+        norm
     };
+    let mesh = norm.apply_mesh(mesh);
     let n1 = a.res + 1;
     let total = (n1 * n1 * n1) as u64;
     let bar = if a.quiet {
@@ -239,8 +244,15 @@ fn run_sdf(a: &SdfArgs) -> Result<()> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let t1 = Instant::now();
-    let grid = signed_distance_grid(&mesh, a.res, |n| bar.set_position(n as u64))
-        .with_context(|| format!("computing the SDF of {}", a.mesh.display()))?;
+    let grid = match &repaired {
+        Some(r) => r.grid(
+            |m| norm.apply_mesh(m),
+            a.res,
+            |n| bar.set_position(n as u64),
+        ),
+        None => signed_distance_grid(&mesh, a.res, |n| bar.set_position(n as u64)),
+    }
+    .with_context(|| format!("computing the SDF of {}", a.mesh.display()))?;
     let secs = t1.elapsed().as_secs_f64();
     bar.finish_and_clear();
     io::npy::write_npy_grid_f32(&a.output, &grid.to_grid3())

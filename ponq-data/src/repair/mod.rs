@@ -231,6 +231,48 @@ fn parts_to_test(
 /// A mesh without faces, with non-finite coordinates, indices out of range, all its vertices
 /// at one point, or with nothing left after the repair.
 pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectReport)> {
+    repair_with_solid(mesh, opts).map(|r| (r.mesh, r.report))
+}
+
+/// A repaired mesh ([`repair_with_solid`]).
+#[derive(Debug, Clone)]
+pub struct Repaired {
+    /// The surface to take distances to.
+    pub mesh: TriMesh,
+    /// When faces that separate nothing were removed (step 6): the closed, oriented surface
+    /// they were removed from, whose winding number (`|w| > 1/2`) is the inside of `mesh`'s
+    /// solid without the cracks the removal may leave where copies cross.
+    pub solid: Option<TriMesh>,
+    /// What was found and done.
+    pub report: DefectReport,
+}
+
+impl Repaired {
+    /// The exact signed distance grid (`res` cells per side over `[-1,1]^3`) of the repaired
+    /// mesh moved by `map` (the normalisation, or the identity): distances to
+    /// [`Repaired::mesh`], the sign of [`Repaired::solid`] where there is one.
+    ///
+    /// # Errors
+    /// As [`MeshSdf::grid`].
+    pub fn grid(
+        &self,
+        map: impl Fn(&TriMesh) -> TriMesh,
+        res: usize,
+        progress: impl Fn(usize) + Sync,
+    ) -> Result<crate::sdf::SdfGrid> {
+        let sdf = MeshSdf::new(&map(&self.mesh))?;
+        match &self.solid {
+            Some(s) => sdf.grid_signed_by(&MeshSdf::new(&map(s))?, res, progress),
+            None => sdf.grid(res, progress),
+        }
+    }
+}
+
+/// [`repair`], with the closed surface that signs the result where faces were removed.
+///
+/// # Errors
+/// As [`repair`].
+pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaired> {
     let diag = check_input(mesh)?;
     let eps = 1e-6 * diag;
     let mut report = DefectReport {
@@ -275,7 +317,11 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
         }
         report.output_vertices = out.vertices.len();
         report.output_faces = out.faces.len();
-        return Ok((out, report));
+        return Ok(Repaired {
+            mesh: out,
+            solid: None,
+            report,
+        });
     }
     if clean {
         // Several closed parts: unchanged unless two cross or one sits inside another the
@@ -302,7 +348,11 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
         if !test.iter().any(|&t| t) {
             report.output_vertices = mesh.vertices.len();
             report.output_faces = mesh.faces.len();
-            return Ok((mesh.clone(), report));
+            return Ok(Repaired {
+                mesh: mesh.clone(),
+                solid: None,
+                report,
+            });
         }
     }
     report.repaired = true;
@@ -327,7 +377,12 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
     let (comp, parts) = manifold_components(&faces, &uses);
     report.flipped_faces = orient::orient_parts(&vertices, &mut faces, &uses, &comp, parts);
     if !opts.fill_holes && !opts.remove_internal {
-        return Ok(finish(vertices, faces, report));
+        let (mesh, report) = finish(vertices, faces, report);
+        return Ok(Repaired {
+            mesh,
+            solid: None,
+            report,
+        });
     }
     // 4: close the holes.
     if opts.fill_holes {
@@ -402,6 +457,7 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
         }
     }
     // 6: faces that separate nothing, and inverted faces.
+    let mut solid_faces: Option<Vec<[u32; 3]>> = None;
     let pairs = intersecting_face_pairs(&m);
     report.self_intersecting_pairs = Some(pairs.len());
     if let (true, Some(solid)) = (opts.remove_internal, &sdf) {
@@ -422,6 +478,16 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
                 Side::Internal => report.internal_faces_removed += 1,
             }
         }
+        if report.internal_faces_removed > 0 {
+            let faces: Vec<[u32; 3]> = m
+                .faces
+                .iter()
+                .zip(&comp)
+                .filter(|&(_, &c)| !open_parts[c as usize])
+                .map(|(f, _)| *f)
+                .collect();
+            solid_faces = Some(faces);
+        }
         if kept.is_empty() {
             return Err(DataError::Invalid(
                 "no face of the mesh separates an inside from an outside: it encloses no volume \
@@ -432,7 +498,20 @@ pub fn repair(mesh: &TriMesh, opts: &RepairOptions) -> Result<(TriMesh, DefectRe
         }
         m.faces = kept;
     }
-    Ok(finish(m.vertices, m.faces, report))
+    let solid = solid_faces.map(|faces| {
+        let mut s = TriMesh {
+            vertices: m.vertices.clone(),
+            faces,
+        };
+        s.remove_unreferenced_vertices();
+        s
+    });
+    let (mesh, report) = finish(m.vertices, m.faces, report);
+    Ok(Repaired {
+        mesh,
+        solid,
+        report,
+    })
 }
 
 /// For each vertex, the first vertex at exactly its position (`-0.0` equals `0.0`), and the

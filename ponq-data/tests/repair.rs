@@ -129,6 +129,41 @@ fn every_defect_class_gives_back_the_solid() {
     }
 }
 
+/// Defects together, as real meshes have them: holes, then half the faces flipped, then a
+/// soup with cracks; and fins on top of flipped faces.
+#[test]
+fn combined_defects_give_back_the_solid() {
+    let cell = 2.0 / RES as f64;
+    for name in ["csg.obj", "example001.obj"] {
+        let clean = example(name);
+        let norm = Normalization::of(&clean).unwrap();
+        let clean_n = norm.apply_mesh(&clean);
+        let want = grid(&clean_n);
+        for (i, chain) in [
+            [Defect::Holes, Defect::Flip50, Defect::Cracks],
+            [Defect::Flip10, Defect::Fins, Defect::Duplicates],
+        ]
+        .iter()
+        .enumerate()
+        {
+            let mut m = clean_n.clone();
+            for (k, &d) in chain.iter().enumerate() {
+                m = break_mesh(&m, d, 11 + k as u64, cell).unwrap();
+            }
+            let r = repair_with_solid(&m, &RepairOptions::default()).unwrap();
+            let got = r.grid(|m| m.clone(), RES, |_| {}).unwrap();
+            let (signs, worst) = compare(&want, &got, 2.0 * cell as f32);
+            assert!(
+                signs <= want.values.len() / 500,
+                "{name} chain {i}: {signs} nodes change sign\n{}",
+                r.report
+            );
+            assert!(worst <= 1e-4, "{name} chain {i}: {worst}\n{}", r.report);
+            assert!(r.report.internal_faces_removed <= 60, "{}", r.report);
+        }
+    }
+}
+
 #[test]
 fn clean_meshes_are_used_as_they_are() {
     for name in ["csg.obj", "example001.obj"] {

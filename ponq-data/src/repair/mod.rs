@@ -384,8 +384,9 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             report,
         });
     }
-    // 4: close the holes.
+    // 4: close the holes (the edge uses again: the orientation changed their directions).
     if opts.fill_holes {
+        let uses = edge_uses(&faces);
         let h = holes::fill_holes(&mut vertices, &mut faces, &uses, &comp, opts.max_hole_edges);
         report.holes_filled = h.filled;
         report.hole_faces_added = h.faces_added;
@@ -395,18 +396,30 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
     // did not close) bounds no volume of its own and is not turned.
     let uses = edge_uses(&faces);
     let (comp, parts) = manifold_components(&faces, &uses);
-    let mut open_parts = vec![false; parts];
+    let mut boundary = vec![0usize; parts];
     let mut nonmanifold_parts = vec![false; parts];
     for g in edges::by_edge(&uses) {
         for u in g {
             let c = comp[u.face as usize] as usize;
             match g.len() {
-                1 => open_parts[c] = true,
+                1 => boundary[c] += 1,
                 2 => {}
                 _ => nonmanifold_parts[c] = true,
             }
         }
     }
+    let mut part_faces = vec![0usize; parts];
+    for &c in &comp {
+        part_faces[c as usize] += 1;
+    }
+    // Open parts: those with boundary edges left. A part with at most one boundary edge per
+    // four faces (a surface with a hole the filling could not close) still bounds a solid
+    // nearly everywhere and counts in it; a more open one (a fin, a loose sheet) bounds none:
+    // its own half-turns of winding number next to it would decide its sides.
+    let loose: Vec<bool> = (0..parts)
+        .map(|p| boundary[p] > 0 && 4 * boundary[p] > part_faces[p])
+        .collect();
+    let open_parts: Vec<bool> = boundary.iter().map(|&b| b > 0).collect();
     let volumes = orient::part_volumes(&vertices, &faces, &comp, parts);
     let mut m = TriMesh { vertices, faces };
     let closed_only = |m: &TriMesh| -> Result<Option<MeshSdf>> {
@@ -414,7 +427,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             .faces
             .iter()
             .zip(&comp)
-            .filter(|&(_, &c)| !open_parts[c as usize])
+            .filter(|&(_, &c)| !loose[c as usize])
             .map(|(f, _)| *f)
             .collect();
         if faces.is_empty() {
@@ -433,7 +446,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
         let mut turn = vec![false; parts];
         for p in 0..parts {
             let f = largest[p];
-            if volumes[p] >= 0.0 || f == u32::MAX || open_parts[p] {
+            if volumes[p] >= 0.0 || f == u32::MAX || loose[p] {
                 continue;
             }
             // A point on the part: the winding number of the other parts there says whether
@@ -483,7 +496,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
                 .faces
                 .iter()
                 .zip(&comp)
-                .filter(|&(_, &c)| !open_parts[c as usize])
+                .filter(|&(_, &c)| !loose[c as usize])
                 .map(|(f, _)| *f)
                 .collect();
             solid_faces = Some(faces);

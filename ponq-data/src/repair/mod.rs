@@ -223,6 +223,79 @@ fn parts_to_test(
     test
 }
 
+/// The side of every face with `test` (the others: [`Side::Boundary`]), region by region: the
+/// faces joined across edges of exactly two faces, neither crossing another face (`pairs`),
+/// are on one side throughout (a side only changes across a surface), so the largest face of
+/// each region is tested for all of it; faces that cross another are tested one by one. (Face
+/// by face, the two winding numbers per face were most of the repair's time on overlapping
+/// copies.)
+fn classify_by_regions(
+    solid: &MeshSdf,
+    m: &TriMesh,
+    uses: &[edges::EdgeUse],
+    pairs: &[(usize, usize)],
+    test: &[bool],
+    eps: f64,
+) -> Vec<Side> {
+    let n = m.faces.len();
+    let mut crossing = vec![false; n];
+    for &(i, j) in pairs {
+        crossing[i] = true;
+        crossing[j] = true;
+    }
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn root(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    let joins = |f: u32| test[f as usize] && !crossing[f as usize];
+    for g in edges::by_edge(uses) {
+        if g.len() == 2 && joins(g[0].face) && joins(g[1].face) {
+            let (a, b) = (root(&mut parent, g[0].face), root(&mut parent, g[1].face));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let area = |f: usize| {
+        use ponq_mesh::vec3::{cross, dot, sub};
+        let [a, b, c] = m.faces[f].map(|i| m.vertices[i as usize]);
+        let x = cross(sub(b, a), sub(c, a));
+        dot(x, x)
+    };
+    // The largest face of each region.
+    let mut rep: HashMap<u32, (f64, usize)> = HashMap::new();
+    for f in 0..n {
+        if test[f] && !crossing[f] {
+            let r = root(&mut parent, f as u32);
+            let a = area(f);
+            let e = rep.entry(r).or_insert((a, f));
+            if a > e.0 {
+                *e = (a, f);
+            }
+        }
+    }
+    let mut probe: Vec<bool> = (0..n).map(|f| test[f] && crossing[f]).collect();
+    for &(_, f) in rep.values() {
+        probe[f] = true;
+    }
+    let probed = classify(solid, &m.vertices, &m.faces, &probe, eps);
+    (0..n)
+        .map(|f| {
+            if !test[f] {
+                Side::Boundary
+            } else if crossing[f] {
+                probed[f]
+            } else {
+                probed[rep[&root(&mut parent, f as u32)].1]
+            }
+        })
+        .collect()
+}
+
 /// Repairs `mesh` as the [module docs](self) say; returns the mesh to take the signed
 /// distance of and the report. The output's vertices are the input's (merged), plus one per
 /// hole of more than three edges.
@@ -479,7 +552,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             .collect();
         let test_parts = parts_to_test(solid, &m, &comp, parts, &pairs, &flagged, eps);
         let test: Vec<bool> = comp.iter().map(|&c| test_parts[c as usize]).collect();
-        let sides = classify(solid, &m.vertices, &m.faces, &test, eps);
+        let sides = classify_by_regions(solid, &m, &uses, &pairs, &test, eps);
         let mut kept = Vec::with_capacity(m.faces.len());
         for (t, s) in m.faces.iter().zip(&sides) {
             match s {

@@ -147,6 +147,68 @@ fn open_surfaces_under_open_are_valid_open_surfaces() {
     assert!(!m.faces.is_empty());
 }
 
+/// A single sheet (a wavy terrain, its triangles in random orientations) under `--open`: a
+/// valid open surface.
+#[test]
+fn a_terrain_under_open_is_a_valid_open_surface() {
+    let d = tmp("terrain");
+    let n = 24u32;
+    let h = |x: f64, y: f64| 0.15 * (3.0 * x).sin() * (2.0 * y).cos();
+    let mut vertices = Vec::new();
+    for i in 0..=n {
+        for j in 0..=n {
+            let (x, y) = (
+                -1.0 + 2.0 * i as f64 / n as f64,
+                -1.0 + 2.0 * j as f64 / n as f64,
+            );
+            vertices.push([x, y, h(x, y)]);
+        }
+    }
+    let id = |i: u32, j: u32| i * (n + 1) + j;
+    let mut faces = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, e) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            // Every third triangle the other way round.
+            let t1 = if (i + j) % 3 == 0 {
+                [a, c, b]
+            } else {
+                [a, b, c]
+            };
+            faces.push(t1);
+            faces.push([a, c, e]);
+        }
+    }
+    let sheet = TriMesh::new(vertices, faces).unwrap();
+    let input = d.join("terrain.obj");
+    io::write_mesh(&input, &sheet).unwrap();
+    let out = d.join("out.obj");
+    let (code, text) = run(&[
+        input.as_os_str(),
+        "--open".as_ref(),
+        "--res".as_ref(),
+        RES.as_ref(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    let m = io::read_mesh(&out).unwrap();
+    let r = validity::check(&m);
+    assert!(r.is_valid_open_surface() && !m.faces.is_empty(), "{r}");
+    // Without --open its border is closed by a fan: a thin solid, valid.
+    let closed = d.join("closed.obj");
+    let (code, text) = run(&[
+        input.as_os_str(),
+        "--res".as_ref(),
+        RES.as_ref(),
+        "-o".as_ref(),
+        closed.as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("filled holes: 1"), "{text}");
+    assert!(validity::check(&io::read_mesh(&closed).unwrap()).is_valid());
+}
+
 #[test]
 fn nothing_to_reconstruct_is_a_clear_error() {
     let d = tmp("nothing");

@@ -31,6 +31,9 @@
 
 use std::time::{Duration, Instant};
 
+use std::borrow::Cow;
+
+use ponq_mesh::band::BandGrid;
 use ponq_mesh::nn::PointIndex;
 use ponq_mesh::{Ponq, Quadric, TriMesh};
 use rayon::prelude::*;
@@ -38,12 +41,15 @@ use rayon::prelude::*;
 use crate::error::{DataError, Result};
 use crate::sdf::{ClosestQueries, MeshSdf};
 
-/// A grid of signed distances, negative inside: node `(i, j, k)` at `lo + h (i, j, k)`,
-/// values in C order (`k` fastest).
+/// A grid of signed distances, negative inside: node `(i, j, k)` at `lo + h (i, j, k)`.
+/// The values live in a [`BandGrid`]: every stage here reads the nodes near the surface
+/// only (the band `|d| < 3` cells and two nodes around it), so a grid stored near its surface
+/// gives the same results as the dense one ([`DistanceGrid::band_threshold`] says how wide
+/// the band must be).
 ///
-/// Invariants (checked by [`DistanceGrid::new`]): `values.len()` is the product of `dims`,
-/// every dimension is at least 2, `h` is positive and finite.
-#[derive(Debug, Clone, Copy)]
+/// Invariants (checked by the constructors): every dimension is at least 2, `h` is positive
+/// and finite, every value finite.
+#[derive(Debug, Clone)]
 pub struct DistanceGrid<'a> {
     /// Nodes per axis.
     pub dims: [usize; 3],
@@ -52,30 +58,20 @@ pub struct DistanceGrid<'a> {
     /// Node spacing (the same along every axis).
     pub h: f64,
     /// Signed distances.
-    pub values: &'a [f64],
+    values: Cow<'a, BandGrid>,
 }
 
 impl<'a> DistanceGrid<'a> {
-    /// Checks and wraps a grid.
+    /// Checks and wraps a dense grid (`values` in C order, `k` fastest).
     ///
     /// # Errors
     /// [`DataError::Invalid`] for a size mismatch, fewer than 2 nodes along an axis, a
     /// spacing that is not positive and finite, or a non-finite value.
-    pub fn new(dims: [usize; 3], lo: [f64; 3], h: f64, values: &'a [f64]) -> Result<Self> {
-        if dims.iter().any(|&d| d < 2) {
-            return Err(DataError::Invalid(format!(
-                "a distance grid needs at least 2 nodes per axis, got {dims:?}"
-            )));
-        }
+    pub fn new(dims: [usize; 3], lo: [f64; 3], h: f64, values: &[f64]) -> Result<Self> {
         if values.len() != dims.iter().product::<usize>() {
             return Err(DataError::Invalid(format!(
                 "{} values for a grid of {dims:?} nodes",
                 values.len()
-            )));
-        }
-        if !(h > 0.0 && h.is_finite()) || lo.iter().any(|x| !x.is_finite()) {
-            return Err(DataError::Invalid(format!(
-                "invalid grid frame: origin {lo:?}, spacing {h}"
             )));
         }
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
@@ -83,17 +79,71 @@ impl<'a> DistanceGrid<'a> {
                 "the grid holds a non-finite value at flat index {i}"
             )));
         }
+        Self::check_frame(dims, lo, h)?;
+        let band = BandGrid::from_dense(dims, values, 1.0, f64::INFINITY, 0)
+            .map_err(|e| DataError::Invalid(e.to_string()))?;
         Ok(Self {
             dims,
             lo,
             h,
-            values,
+            values: Cow::Owned(band),
         })
     }
 
+    /// Wraps a grid stored near its surface; its band must hold every node with
+    /// `|d| < band_threshold(h, band)` and [`BAND_REACH`] nodes around each.
+    ///
+    /// # Errors
+    /// [`DataError::Invalid`] for an invalid frame, or a band narrower than the stages need.
+    pub fn from_band(grid: &'a BandGrid, lo: [f64; 3], h: f64, band: f64) -> Result<Self> {
+        let dims = grid.dims();
+        Self::check_frame(dims, lo, h)?;
+        if grid.threshold() < Self::band_threshold(h, band) || grid.reach() < BAND_REACH {
+            return Err(DataError::Invalid(format!(
+                "the stored band (|d| < {}, reach {}) is narrower than the refinement reads \
+                 (|d| < {}, reach {BAND_REACH})",
+                grid.threshold(),
+                grid.reach(),
+                Self::band_threshold(h, band)
+            )));
+        }
+        Ok(Self {
+            dims,
+            lo,
+            h,
+            values: Cow::Borrowed(grid),
+        })
+    }
+
+    /// The smallest band threshold [`DistanceGrid::from_band`] accepts for cells of size `h`
+    /// and a sampling band of `band` cells ([`RefineOptions::band`]): the distance check
+    /// reads the nodes below 3 cells, the sampling those below `band`.
+    pub fn band_threshold(h: f64, band: f64) -> f64 {
+        h * band.max(3.0)
+    }
+
+    fn check_frame(dims: [usize; 3], lo: [f64; 3], h: f64) -> Result<()> {
+        if dims.iter().any(|&d| d < 2) {
+            return Err(DataError::Invalid(format!(
+                "a distance grid needs at least 2 nodes per axis, got {dims:?}"
+            )));
+        }
+        if !(h > 0.0 && h.is_finite()) || lo.iter().any(|x| !x.is_finite()) {
+            return Err(DataError::Invalid(format!(
+                "invalid grid frame: origin {lo:?}, spacing {h}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The values.
+    pub fn values(&self) -> &BandGrid {
+        &self.values
+    }
+
     #[inline]
-    fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        (i * self.dims[1] + j) * self.dims[2] + k
+    fn value(&self, i: usize, j: usize, k: usize) -> f64 {
+        self.values.get(i, j, k)
     }
 
     #[inline]
@@ -105,13 +155,15 @@ impl<'a> DistanceGrid<'a> {
         ]
     }
 
-    #[inline]
-    fn coords(&self, flat: usize) -> [usize; 3] {
-        let k = flat % self.dims[2];
-        let ij = flat / self.dims[2];
-        [ij / self.dims[1], ij % self.dims[1], k]
+    /// Flat indices, ascending, of the nodes with `|d| < band` (in grid units).
+    fn band_nodes(&self, band: f64) -> Vec<usize> {
+        self.values.stored_where(|v| v.abs() < band)
     }
 }
+
+/// Nodes around a band node that the stages read (the 5x5x5 blocks of [`check_distance`]
+/// and [`grid_samples`]).
+pub const BAND_REACH: usize = 2;
 
 /// Options of [`grid_samples`], [`refit`] and [`refine`]. Lengths are in grid cells.
 #[derive(Debug, Clone)]
@@ -257,38 +309,35 @@ pub fn check_distance(grid: &DistanceGrid) -> DistanceCheck {
         })
         .collect();
     // A truncated field clamps many nodes to its extreme values: leave those out.
-    let (vmin, vmax) = grid
-        .values
-        .iter()
-        .fold((0.0f64, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-    let count_at = |x: f64| grid.values.iter().filter(|&&v| v == x).count();
+    let stats = grid.values.stats();
+    let (vmin, vmax) = (stats.min.min(0.0), stats.max.max(0.0));
+    let count_at = |x: f64| stats.count_of_extreme(x).unwrap_or(0) as usize;
     let many = grid.values.len() / 100;
     let clamp_hi = (vmax > 0.0 && count_at(vmax) > many).then_some(vmax);
     let clamp_lo = (vmin < 0.0 && count_at(vmin) > many).then_some(vmin);
     let clamped = |v: f64| Some(v) == clamp_hi || Some(v) == clamp_lo;
-    let rates: Vec<f64> = (R..n0.saturating_sub(R))
-        .into_par_iter()
-        .flat_map_iter(|i| {
-            let offsets = &offsets;
-            (R..n1.saturating_sub(R)).flat_map(move |j| {
-                (R..n2.saturating_sub(R)).filter_map(move |k| {
-                    let v = grid.values[grid.index(i, j, k)];
-                    if !(v.abs() > h && v.abs() < 3.0 * h) || clamped(v) {
-                        return None;
-                    }
-                    let sign = v.signum();
-                    let mut best = f64::NEG_INFINITY;
-                    for &(o, inv) in offsets {
-                        let y = grid.values[grid.index(
-                            (i as isize + o[0]) as usize,
-                            (j as isize + o[1]) as usize,
-                            (k as isize + o[2]) as usize,
-                        )];
-                        best = best.max(sign * (v - y) * inv);
-                    }
-                    Some(best)
-                })
-            })
+    let tested = grid
+        .values
+        .stored_where(|v| v.abs() > h && v.abs() < 3.0 * h && !clamped(v));
+    let rates: Vec<f64> = tested
+        .par_iter()
+        .filter_map(|&f| {
+            let [i, j, k] = grid.values.coords(f);
+            if i < R || j < R || k < R || i + R >= n0 || j + R >= n1 || k + R >= n2 {
+                return None;
+            }
+            let v = grid.value(i, j, k);
+            let sign = v.signum();
+            let mut best = f64::NEG_INFINITY;
+            for &(o, inv) in &offsets {
+                let y = grid.value(
+                    (i as isize + o[0]) as usize,
+                    (j as isize + o[1]) as usize,
+                    (k as isize + o[2]) as usize,
+                );
+                best = best.max(sign * (v - y) * inv);
+            }
+            Some(best)
         })
         .collect();
     let n = rates.len();
@@ -348,10 +397,7 @@ pub fn grid_samples(
 ) -> Result<GridSamples> {
     let sdf = MeshSdf::for_distances(mesh)?;
     let h = grid.h;
-    let band = opts.band * h;
-    let nodes: Vec<usize> = (0..grid.values.len())
-        .filter(|&f| grid.values[f].abs() < band)
-        .collect();
+    let nodes = grid.band_nodes(opts.band * h);
     let tol = opts.ball_tolerance * h;
     let max_shift = opts.max_shift * h;
     type Out = (Option<([f64; 3], [f64; 3])>, f64);
@@ -361,9 +407,9 @@ pub fn grid_samples(
             let sdf = &sdf;
             let mut queries = ClosestQueries::default();
             chunk.iter().map(move |&f| {
-                let [i, j, k] = grid.coords(f);
+                let [i, j, k] = grid.values.coords(f);
                 let x = grid.node(i, j, k);
-                let d = grid.values[f];
+                let d = grid.value(i, j, k);
                 let r = d.abs();
                 let (y, nf) = sdf.closest_point_and_normal_with(x, &mut queries);
                 let yx = sub(y, x);
@@ -467,19 +513,16 @@ pub fn grid_samples(
 /// As [`grid_samples`].
 pub fn fit_residual(grid: &DistanceGrid, mesh: &TriMesh, opts: &RefineOptions) -> Result<f64> {
     let sdf = MeshSdf::for_distances(mesh)?;
-    let band = opts.band * grid.h;
-    let nodes: Vec<usize> = (0..grid.values.len())
-        .filter(|&f| grid.values[f].abs() < band)
-        .collect();
+    let nodes = grid.band_nodes(opts.band * grid.h);
     let (sq, n) = nodes
         .par_chunks(QUERY_CHUNK)
         .map(|chunk| {
             let mut queries = ClosestQueries::default();
             chunk.iter().fold((0.0, 0usize), |(sq, n), &f| {
-                let [i, j, k] = grid.coords(f);
+                let [i, j, k] = grid.values.coords(f);
                 let x = grid.node(i, j, k);
                 let (y, _) = sdf.closest_point_and_normal_with(x, &mut queries);
-                let res = (norm(sub(y, x)) - grid.values[f].abs()) / grid.h;
+                let res = (norm(sub(y, x)) - grid.value(i, j, k).abs()) / grid.h;
                 (sq + res * res, n + 1)
             })
         })
@@ -517,7 +560,7 @@ pub fn clear_balls(grid: &DistanceGrid, ponq: &mut Ponq, max_move: f64) -> usize
                 for_each_neighbour(grid, at, &mut consider);
                 consider(
                     grid.node(at[0], at[1], at[2]),
-                    grid.values[grid.index(at[0], at[1], at[2])].abs(),
+                    grid.value(at[0], at[1], at[2]).abs(),
                 );
                 if worst.1 <= 1e-3 * h {
                     break;
@@ -562,7 +605,7 @@ pub fn intrusions(grid: &DistanceGrid, mesh: &TriMesh, depth: f64) -> usize {
                     return false;
                 }
                 let [i, j, k] = n.map(|x| x as usize);
-                let r = grid.values[grid.index(i, j, k)].abs();
+                let r = grid.value(i, j, k).abs();
                 r - norm(sub(p, grid.node(i, j, k))) > depth
             })
         })
@@ -580,12 +623,11 @@ fn for_each_neighbour(grid: &DistanceGrid, at: [usize; 3], mut f: impl FnMut([f6
     };
     for i in range(0) {
         for j in range(1) {
-            let row = grid.index(i, j, 0);
             for k in range(2) {
                 if [i, j, k] == at {
                     continue;
                 }
-                f(grid.node(i, j, k), grid.values[row + k].abs());
+                f(grid.node(i, j, k), grid.value(i, j, k).abs());
             }
         }
     }

@@ -25,15 +25,20 @@ impl Frame {
     /// Checks a grid against its bounds: at least 2 nodes per axis, finite values, equal
     /// cell sizes along the axes (relative tolerance 1e-6).
     pub fn of(grid: &Grid3, bounds: ([f64; 3], [f64; 3])) -> Result<Self> {
-        let d = grid.dims;
-        if d.iter().any(|&x| x < 2) {
-            bail!("the grid must have at least 2 nodes along every axis, it has {d:?}");
-        }
         if let Some(i) = grid.data.iter().position(|v| !v.is_finite()) {
             bail!(
                 "the grid holds a non-finite value ({}) at flat index {i}",
                 grid.data[i]
             );
+        }
+        Self::of_dims(grid.dims, bounds)
+    }
+
+    /// The frame of a grid of `d` nodes over `bounds` (the checks of [`Frame::of`] but the
+    /// values').
+    pub fn of_dims(d: [usize; 3], bounds: ([f64; 3], [f64; 3])) -> Result<Self> {
+        if d.iter().any(|&x| x < 2) {
+            bail!("the grid must have at least 2 nodes along every axis, it has {d:?}");
         }
         let (lo, hi) = bounds;
         let mut hs = [0.0; 3];

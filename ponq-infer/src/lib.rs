@@ -32,7 +32,7 @@ pub mod tiles;
 
 pub use frame::Frame;
 pub use reconstruct::{
-    InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, finish, infer,
-    predict,
+    InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, band_parameters,
+    finish, infer, predict, predict_band,
 };
-pub use tiles::predict_tiled;
+pub use tiles::{predict_cells, predict_tiled};

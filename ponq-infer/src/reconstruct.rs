@@ -13,11 +13,12 @@ use ponq_mesh::{Ponq, TriMesh};
 use ponq_model::{PonqNet, network_input_scale};
 
 use ponq_data::refine::{
-    DistanceCheck, DistanceGrid, RefineOptions, check_distance, clear_balls, refine,
+    BAND_REACH, DistanceCheck, DistanceGrid, RefineOptions, check_distance, clear_balls, refine,
 };
+use ponq_mesh::band::BandGrid;
 
 use crate::frame::{Frame, ponq_to_user};
-use crate::tiles::predict_tiled;
+use crate::tiles::predict_cells;
 
 /// The default of [`InferOptions::merge_smooth`]: cells whose predicted normals agree within
 /// 15 degrees get one point. Chosen on the shared meshes (docs/evaluation.md): the four noisy
@@ -211,18 +212,38 @@ pub struct Inference {
 pub struct Predicted {
     /// The grid's frame.
     pub frame: Frame,
-    /// The grid's values in the normalised frame (distances times [`Frame::scale`]).
-    pub normalised: Vec<f64>,
+    /// The grid's values in the normalised frame (distances times [`Frame::scale`]), stored
+    /// near the surface ([`band_parameters`]).
+    pub normalised: BandGrid,
     /// Every point of the kept cells.
     pub ponq: Ponq,
     /// The grid cell of each point.
     pub cells: Vec<[u32; 3]>,
     /// Tiles the network ran on.
     pub tiles: usize,
+    /// Cells near the surface (the network ran on these).
+    pub close_cells: usize,
     /// Cells kept (occupied and close).
     pub kept_cells: usize,
     /// Time of the network.
     pub network: Duration,
+}
+
+/// The band of a grid that inference reads, for a frame of `n` cells along its longest
+/// axis and the network's `encoder_layers`: the threshold (in the normalised frame) and
+/// the reach (nodes) of a [`BandGrid`] holding every node any stage reads (the cells that
+/// can be kept, the encoder's margin around them, the refinement's band and the nodes
+/// around it).
+pub fn band_parameters(n: usize, encoder_layers: usize, opts: &InferOptions) -> (f64, usize) {
+    let h = 2.0 / n as f64;
+    let t = close_threshold(n).max(DistanceGrid::band_threshold(h, opts.refine_options.band));
+    (t * (1.0 + 1e-9), encoder_layers.max(BAND_REACH) + 1)
+}
+
+/// A cell can be kept when all its corners are closer than this (normalised frame) to the
+/// surface.
+fn close_threshold(n: usize) -> f64 {
+    2.0 * 3f64.sqrt() / (n as f64 + 1.0)
 }
 
 /// Runs the network on an SDF grid (negative inside) and returns its PoNQ over the kept
@@ -240,37 +261,73 @@ pub fn predict(
     progress: impl FnMut(usize, usize),
 ) -> Result<Predicted> {
     let frame = Frame::of(grid, opts.bounds)?;
-    let (min, max) = grid
-        .data
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
-    if !(min < 0.0 && max > 0.0) {
+    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
+    let band = BandGrid::from_dense(grid.dims, &grid.data, frame.scale(), t, reach)?;
+    predict_band(net, encoder_layers, band, opts, device, progress)
+}
+
+/// [`predict`] on a grid already stored near its surface, in the normalised frame (read with
+/// `ponq_mesh::io::npy::read_npy_band` and [`band_parameters`]; `opts.bounds` give the
+/// frame). Nothing here allocates per node or per cell of the whole grid.
+///
+/// # Errors
+/// As [`predict`]; a band narrower than [`band_parameters`].
+pub fn predict_band(
+    net: &PonqNet,
+    encoder_layers: usize,
+    band: BandGrid,
+    opts: &InferOptions,
+    device: &Device,
+    progress: impl FnMut(usize, usize),
+) -> Result<Predicted> {
+    let frame = Frame::of_dims(band.dims(), opts.bounds)?;
+    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
+    if band.threshold() < t || band.reach() < reach {
         bail!(
-            "the SDF has no sign change (values in [{min}, {max}]): the surface is empty; nothing to mesh"
+            "the grid's stored band (|d| < {}, reach {}) is narrower than inference reads (|d| < {t}, reach {reach})",
+            band.threshold(),
+            band.reach()
         );
     }
-    let s = frame.scale();
-    let normalised: Vec<f64> = grid.data.iter().map(|v| v * s).collect();
-    let k = network_input_scale(frame.n);
-    let input: Vec<f32> = normalised.iter().map(|&v| v as f32 * k).collect();
-    // Close mask over the cells.
-    let [c0, c1, c2] = frame.cells;
-    let thr = 2.0 * 3f64.sqrt() / (frame.n as f64 + 1.0);
-    let node = |i: usize, j: usize, k: usize| normalised[(i * (c1 + 1) + j) * (c2 + 1) + k];
-    let mut close = Vec::with_capacity(c0 * c1 * c2);
-    for i in 0..c0 {
-        for j in 0..c1 {
-            for k in 0..c2 {
-                close.push(
-                    (0..8).all(|d| node(i + (d >> 2), j + ((d >> 1) & 1), k + (d & 1)).abs() < thr),
-                );
-            }
-        }
+    let stats = band.stats();
+    if !(stats.min < 0.0 && stats.max > 0.0) {
+        let s = frame.scale();
+        bail!(
+            "the SDF has no sign change (values in [{}, {}]): the surface is empty; nothing to mesh",
+            stats.min / s,
+            stats.max / s
+        );
     }
+    let k = network_input_scale(frame.n);
+    // The cells near the surface: all 8 corners closer than the threshold (such corners are
+    // stored).
+    let [c0, c1, c2] = frame.cells;
+    let thr = close_threshold(frame.n);
+    let mut close = Vec::new();
+    band.for_each_stored(|i, j, kk, v| {
+        if i < c0
+            && j < c1
+            && kk < c2
+            && v.abs() < thr
+            && (1..8).all(|d| {
+                band.get(i + (d >> 2), j + ((d >> 1) & 1), kk + (d & 1))
+                    .abs()
+                    < thr
+            })
+        {
+            close.push((i * c1 + j) * c2 + kk);
+        }
+    });
+    close.sort_unstable();
     let t0 = Instant::now();
-    let (pred, tiles) = predict_tiled(
+    let (pred, tiles) = predict_cells(
         net,
-        &input,
+        |lo, hi| {
+            band.block(lo, hi)
+                .into_iter()
+                .map(|v| v as f32 * k)
+                .collect()
+        },
         &frame,
         encoder_layers,
         if opts.tile == 0 {
@@ -279,19 +336,33 @@ pub fn predict(
             opts.tile
         },
         opts.authors_cell_base,
-        Some(&close),
+        &close,
         device,
         progress,
     )?;
     let network = t0.elapsed();
-    let kept = pred.kept_cells(opts.occupancy_threshold, Some(&close))?;
-    let (ponq, cells) = pred.to_ponq(&kept)?;
+    let kept = pred.kept_cells(opts.occupancy_threshold, None)?;
+    let (ponq, _) = pred.to_ponq(&kept)?;
+    let p = net.points_per_cell();
+    let cells = kept
+        .iter()
+        .flat_map(|&r| {
+            let c = close[r];
+            let at = [
+                (c / (c1 * c2)) as u32,
+                ((c / c2) % c1) as u32,
+                (c % c2) as u32,
+            ];
+            std::iter::repeat_n(at, p)
+        })
+        .collect();
     Ok(Predicted {
         frame,
-        normalised,
+        normalised: band,
         ponq,
         cells,
         tiles,
+        close_cells: close.len(),
         kept_cells: kept.len(),
         network,
     })
@@ -373,11 +444,11 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
     // The grid's distances in the normalised frame; not needed when refinement is off.
     let grid = match opts.refine {
         RefineMode::Off => None,
-        _ => Some(DistanceGrid::new(
-            frame.cells.map(|c| c + 1),
+        _ => Some(DistanceGrid::from_band(
+            &p.normalised,
             [-1.0; 3],
             2.0 / frame.n as f64,
-            &p.normalised,
+            opts.refine_options.band,
         )?),
     };
     let wanted = match (&grid, opts.refine) {

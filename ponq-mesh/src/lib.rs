@@ -21,6 +21,7 @@
 //! # Ok::<(), ponq_mesh::Error>(())
 //! ```
 
+pub mod band;
 pub mod bvh;
 pub mod caps;
 pub mod cli;

@@ -9,7 +9,8 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_infer::mesh_input::{MeshInput, mesh_grid};
-use ponq_infer::{InferOptions, RefineMode, finish, predict, shipped};
+use ponq_infer::reconstruct::band_parameters;
+use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict, predict_band, shipped};
 use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::{io, validity};
@@ -151,6 +152,21 @@ fn bar(quiet: bool, template: &str) -> ProgressBar {
     pb
 }
 
+/// The grid as read: a mesh's dense grid, or a file's band.
+enum Input {
+    Dense(ponq_mesh::io::npy::Grid3),
+    Band(ponq_mesh::band::BandGrid),
+}
+
+impl Input {
+    fn dims(&self) -> [usize; 3] {
+        match self {
+            Self::Dense(g) => g.dims,
+            Self::Band(b) => b.dims(),
+        }
+    }
+}
+
 fn is_mesh_path(p: &Path) -> bool {
     ponq_mesh::io::MeshFormat::from_path(p).is_some()
 }
@@ -211,45 +227,6 @@ fn run(args: &Args) -> Result<Outcome> {
         );
     }
     let dev = device(args.backend).map_err(anyhow::Error::msg)?;
-    let t = Instant::now();
-    let (grid, normalization) = if mesh_input {
-        let mesh = io::read_mesh(&args.input)
-            .with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
-        let res = args.res.unwrap_or(64);
-        let pb = bar(
-            args.quiet,
-            "sdf {bar:30} {percent:>3}% of {len} nodes [{elapsed} < {eta}]",
-        );
-        pb.set_length(((res + 1) as u64).pow(3));
-        let input = MeshInput {
-            open_surface: args.open.is_some(),
-            repair: !args.no_repair,
-        };
-        let g = mesh_grid(&mesh, res, input, |n| pb.set_position(n as u64))
-            .with_context(|| format!("the input mesh {}", args.input.display()))?;
-        pb.finish_and_clear();
-        if let Some(r) = &g.report {
-            if !args.quiet && (r.found_defects() || r.ambiguous_node_share.is_some()) {
-                eprintln!("{r}");
-            }
-            if let Some(path) = &args.json {
-                std::fs::write(path, r.to_json() + "\n")
-                    .with_context(|| format!("writing the defect report {}", path.display()))?;
-            }
-        }
-        if g.open && !args.quiet {
-            eprintln!(
-                "note: the input mesh is open; the grid's sign follows its generalised winding \
-                 number (--open culls the triangles away from the surface)"
-            );
-        }
-        (g.grid, Some(g.normalization))
-    } else {
-        let g = io::npy::read_npy_grid(&args.input)
-            .with_context(|| format!("cannot read the SDF grid {}", args.input.display()))?;
-        (g, None)
-    };
-    let read_time = t.elapsed();
     let (net, net_cfg, authors) = match (&args.model, &args.authors_weights) {
         (_, Some(pt)) => {
             let cfg = ponq_model::PonqNetConfig::new();
@@ -290,21 +267,76 @@ fn run(args: &Args) -> Result<Outcome> {
         },
         ..Default::default()
     };
+    let t = Instant::now();
+    let (grid, normalization) = if mesh_input {
+        let mesh = io::read_mesh(&args.input)
+            .with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
+        let res = args.res.unwrap_or(64);
+        let pb = bar(
+            args.quiet,
+            "sdf {bar:30} {percent:>3}% of {len} nodes [{elapsed} < {eta}]",
+        );
+        pb.set_length(((res + 1) as u64).pow(3));
+        let input = MeshInput {
+            open_surface: args.open.is_some(),
+            repair: !args.no_repair,
+        };
+        let g = mesh_grid(&mesh, res, input, |n| pb.set_position(n as u64))
+            .with_context(|| format!("the input mesh {}", args.input.display()))?;
+        pb.finish_and_clear();
+        if let Some(r) = &g.report {
+            if !args.quiet && (r.found_defects() || r.ambiguous_node_share.is_some()) {
+                eprintln!("{r}");
+            }
+            if let Some(path) = &args.json {
+                std::fs::write(path, r.to_json() + "\n")
+                    .with_context(|| format!("writing the defect report {}", path.display()))?;
+            }
+        }
+        if g.open && !args.quiet {
+            eprintln!(
+                "note: the input mesh is open; the grid's sign follows its generalised winding \
+                 number (--open culls the triangles away from the surface)"
+            );
+        }
+        (Input::Dense(g.grid), Some(g.normalization))
+    } else {
+        let pb = bar(
+            args.quiet,
+            "read {bar:30} {pos}/{len} planes [{elapsed} < {eta}]",
+        );
+        let band = io::npy::read_npy_band(
+            &args.input,
+            |dims| {
+                let frame = Frame::of_dims(dims, bounds)
+                    .map_err(|e| ponq_mesh::Error::InvalidInput(format!("{e:#}")))?;
+                let (t, reach) = band_parameters(frame.n, net_cfg.encoder_layers, &opts);
+                Ok((frame.scale(), t, reach))
+            },
+            |done, total| {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            },
+        )
+        .with_context(|| format!("cannot read the SDF grid {}", args.input.display()))?;
+        pb.finish_and_clear();
+        (Input::Band(band), None)
+    };
+    let read_time = t.elapsed();
     if (args.lite || args.coarsen > 0) && args.refine == RefineMode::On {
         bail!("--refine on works on the full PoNQ: not with --lite or --coarsen");
     }
     let pb = bar(args.quiet, "network {bar:30} {pos}/{len} tiles [{elapsed}]");
-    let predicted = match predict(
-        &net,
-        net_cfg.encoder_layers,
-        &grid,
-        &opts,
-        &dev,
-        |done, total| {
-            pb.set_length(total as u64);
-            pb.set_position(done as u64);
-        },
-    ) {
+    let dims = grid.dims();
+    let tick = |done: usize, total: usize| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    };
+    let predicted = match grid {
+        Input::Dense(g) => predict(&net, net_cfg.encoder_layers, &g, &opts, &dev, tick),
+        Input::Band(b) => predict_band(&net, net_cfg.encoder_layers, b, &opts, &dev, tick),
+    };
+    let predicted = match predicted {
         Ok(r) => r,
         Err(e) if e.to_string().contains("no sign change") => {
             pb.finish_and_clear();
@@ -356,7 +388,7 @@ fn run(args: &Args) -> Result<Outcome> {
         println!(
             "{}: grid {:?} -> {} cells kept, {} points -> {} V, {} F",
             args.output.display(),
-            grid.dims,
+            dims,
             res.kept_cells,
             res.ponq.len(),
             res.mesh.vertices.len(),

@@ -13,6 +13,7 @@ use npyz::WriterBuilder;
 
 use super::builder::MAX_PREALLOC;
 use super::file::write_file;
+use crate::band::{BandBuilder, BandGrid};
 use crate::error::{Error, Result};
 
 /// A 3D grid of values stored in C order: `data[(i * dims[1] + j) * dims[2] + k]` is the
@@ -104,6 +105,63 @@ pub fn read_npy_grid(path: impl AsRef<Path>) -> Result<Grid3> {
         ));
     }
     Ok(Grid3 { dims, data: a.data })
+}
+
+/// Reads a rank-3 float32 or float64 `.npy` grid (C or Fortran order) into a
+/// [`BandGrid`] plane by plane, never holding more than a few planes of the whole grid.
+/// `band(dims)` gives, from the grid's node counts, the scale applied to every value, the
+/// threshold (in scaled units) and the reach of the band (see [`BandBuilder::new`]); it may
+/// refuse the grid. `progress(done, total)` counts planes.
+///
+/// Errors are those of [`read_npy_grid`] (naming the file and the node of a non-finite
+/// value), and `band`'s.
+pub fn read_npy_band(
+    path: impl AsRef<Path>,
+    band: impl FnOnce([usize; 3]) -> Result<(f64, f64, usize)>,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<BandGrid> {
+    let path = path.as_ref();
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = match file.metadata() {
+        Ok(m) if m.is_file() => m.len(),
+        _ => u64::MAX,
+    };
+    let mut r = BufReader::with_capacity(1 << 20, file);
+    let (info, size, _, shape) = read_header(&mut r, len).map_err(|m| Error::format(path, m))?;
+    if shape.len() != 3 {
+        return Err(Error::format(
+            path,
+            format!(
+                "expected a 3D grid (rank 3), found an array of shape {}",
+                shape_str(&shape)
+            ),
+        ));
+    }
+    let dims = [shape[0], shape[1], shape[2]];
+    let (scale, threshold, reach) = band(dims)?;
+    // A Fortran-order file holds the planes of the last axis: read it as the reversed grid.
+    let stored = if info.fortran {
+        [dims[2], dims[1], dims[0]]
+    } else {
+        dims
+    };
+    let big = is_big_endian(&info.descr);
+    let mut b = BandBuilder::new(stored, scale, threshold, reach)?;
+    let plane = stored[1] * stored[2];
+    for p in 0..stored[0] {
+        let values = read_values(&mut r, plane, size, big)
+            .map_err(|m| Error::format(path, format!("plane {p} of {}: {m}", stored[0])))?;
+        b.push_plane(&values).map_err(|e| match e {
+            Error::InvalidInput(m) if info.fortran => {
+                Error::format(path, format!("{m} (of the reversed axes: Fortran order)"))
+            }
+            Error::InvalidInput(m) => Error::format(path, m),
+            e => e,
+        })?;
+        progress(p + 1, stored[0]);
+    }
+    let g = b.finish()?;
+    Ok(if info.fortran { g.reversed() } else { g })
 }
 
 /// Writes `grid` to `path` as a C-order `float32` `.npy` file of shape `dims`.
@@ -373,6 +431,31 @@ pub(crate) fn read_array<R: Read>(
     mut r: R,
     max_bytes: u64,
 ) -> std::result::Result<NpyArray, String> {
+    let (info, size, n, shape) = read_header(&mut r, max_bytes)?;
+    let big = is_big_endian(&info.descr);
+    let data = read_values(&mut r, n as usize, size, big)?;
+    let data = if info.fortran && shape.len() > 1 {
+        fortran_to_c(&data, &shape)
+    } else {
+        data
+    };
+    Ok(NpyArray {
+        shape,
+        data,
+        was_f32: size == 4,
+    })
+}
+
+fn is_big_endian(descr: &str) -> bool {
+    descr.starts_with('>') || (descr.starts_with('=') && cfg!(target_endian = "big"))
+}
+
+/// Reads and checks a `.npy` header: what it says, the element size, the value count and
+/// the shape. `max_bytes` bounds the stream's size (the data must fit in it).
+fn read_header<R: Read>(
+    mut r: R,
+    max_bytes: u64,
+) -> std::result::Result<(HeaderInfo, usize, u64, Vec<usize>), String> {
     let mut pre = [0u8; 8];
     r.read_exact(&mut pre)
         .map_err(|e| eof_to_msg(e, "npy header"))?;
@@ -428,19 +511,7 @@ pub(crate) fn read_array<R: Read>(
     if npy.shape() != info.shape.as_slice() {
         return Err("inconsistent npy header".to_string());
     }
-    let big =
-        info.descr.starts_with('>') || (info.descr.starts_with('=') && cfg!(target_endian = "big"));
-    let data = read_values(&mut r, n as usize, size, big)?;
-    let data = if info.fortran && shape.len() > 1 {
-        fortran_to_c(&data, &shape)
-    } else {
-        data
-    };
-    Ok(NpyArray {
-        shape,
-        data,
-        was_f32: size == 4,
-    })
+    Ok((info, size, n, shape))
 }
 
 /// Reads `n` floats of `size` bytes (4 or 8; big-endian if `big`, else little-endian) from
@@ -614,6 +685,86 @@ mod tests {
         assert!(parse(&b).is_err());
         assert!(parse(b"\x93NUMPY").is_err());
         assert!(parse(b"garbage garbage garbage").is_err());
+    }
+
+    /// The streamed band reading holds exactly the values of the dense reading where it
+    /// stores them, in C and Fortran order, float32 and float64.
+    #[test]
+    fn band_reading_matches_the_dense_reading() {
+        let dims = [13usize, 9, 22];
+        let n = dims.iter().product::<usize>();
+        let val = |i: usize, j: usize, k: usize| {
+            ((i as f64 - 6.0).powi(2) + (j as f64 - 4.0).powi(2) + (k as f64 - 11.0).powi(2)).sqrt()
+                - 3.7
+        };
+        for (descr, fortran) in [("<f8", false), ("<f4", false), ("<f8", true), (">f4", true)] {
+            let mut d = Vec::new();
+            let mut push = |v: f64| match descr {
+                "<f8" => d.extend_from_slice(&v.to_le_bytes()),
+                "<f4" => d.extend_from_slice(&(v as f32).to_le_bytes()),
+                _ => d.extend_from_slice(&(v as f32).to_be_bytes()),
+            };
+            if fortran {
+                for k in 0..dims[2] {
+                    for j in 0..dims[1] {
+                        for i in 0..dims[0] {
+                            push(val(i, j, k));
+                        }
+                    }
+                }
+            } else {
+                for i in 0..dims[0] {
+                    for j in 0..dims[1] {
+                        for k in 0..dims[2] {
+                            push(val(i, j, k));
+                        }
+                    }
+                }
+            }
+            let b = npy_bytes(
+                &format!(
+                    "{{'descr': '{descr}', 'fortran_order': {}, 'shape': (13, 9, 22), }}",
+                    if fortran { "True" } else { "False" }
+                ),
+                &d,
+            );
+            let dir = std::env::temp_dir().join(format!("ponq-band-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let p = dir.join(format!("g{descr}{fortran}.npy").replace(['<', '>'], "_"));
+            std::fs::write(&p, &b).unwrap();
+            let dense = read_npy_grid(&p).unwrap();
+            let mut planes = 0;
+            let band = read_npy_band(
+                &p,
+                |d| {
+                    assert_eq!(d, dims);
+                    Ok((2.0, 3.0, 1))
+                },
+                |done, _| planes = done,
+            )
+            .unwrap();
+            assert_eq!(planes, if fortran { 22 } else { 13 });
+            assert_eq!(band.dims(), dims);
+            assert!(band.stored_bricks() > 0);
+            for f in 0..n {
+                let [i, j, k] = band.coords(f);
+                let v = dense.data[f] * 2.0;
+                if band.is_stored(i, j, k) {
+                    assert_eq!(
+                        band.get(i, j, k).to_bits(),
+                        v.to_bits(),
+                        "{descr} {fortran}"
+                    );
+                } else {
+                    assert!(v.abs() >= 3.0 && band.get(i, j, k) == 3.0f64.copysign(v));
+                }
+            }
+            // A cut file says where it ends.
+            std::fs::write(&p, &b[..b.len() - 100]).unwrap();
+            let e = read_npy_band(&p, |_| Ok((1.0, 1.0, 0)), |_, _| {}).unwrap_err();
+            assert!(e.to_string().contains("truncated"), "{e}");
+            std::fs::remove_dir_all(&dir).ok();
+        }
     }
 
     /// The block reader gives npyz's values (what it replaced) for both float sizes and byte

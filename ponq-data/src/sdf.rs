@@ -58,6 +58,7 @@ use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 
 use ponq_mesh::TriMesh;
+use ponq_mesh::band::{BRICK, BandGrid};
 use ponq_mesh::io::npy::Grid3;
 use ponq_mesh::predicates::orient3d;
 use ponq_mesh::validity::check_topology;
@@ -823,6 +824,322 @@ impl MeshSdf {
             }
         }
         false
+    }
+}
+
+/// The signed distance of a mesh near its surface only ([`MeshSdf::band_signed_by`]).
+#[derive(Debug, Clone)]
+pub struct SdfBand {
+    /// The grid's values times the scale asked for, stored near the surface.
+    pub grid: BandGrid,
+    /// As [`SdfGrid::open`].
+    pub open: bool,
+    /// As [`SdfGrid::ambiguous_nodes`], over the stored nodes and one node per far brick.
+    pub ambiguous_nodes: usize,
+    /// The nodes whose sign was decided (stored nodes plus one per far brick).
+    pub signed_nodes: usize,
+}
+
+impl MeshSdf {
+    /// [`MeshSdf::grid_signed_by`] near the surface only: exact distances (rounded to `f32`
+    /// as there, then times `scale`) at the nodes of the bricks within `threshold / scale`
+    /// of either mesh, and of the bricks within `reach` nodes of those; every other brick
+    /// gets only its sign. The stored values equal the dense grid's (times `scale`): the
+    /// signs come from the same components (a far brick joins the nodes around it, as all
+    /// its edges miss the surface), and a component is signed at a far brick's centre when
+    /// it has one. Work and memory follow the surface's area, not the grid's volume.
+    ///
+    /// # Errors
+    /// As [`MeshSdf::grid`]; a scale or threshold that is not positive and finite.
+    pub fn band_signed_by(
+        &self,
+        solid: &MeshSdf,
+        res: usize,
+        scale: f64,
+        threshold: f64,
+        reach: usize,
+        progress: impl Fn(usize, usize) + Sync,
+    ) -> Result<SdfBand> {
+        if !(1..=MAX_RES).contains(&res) {
+            return Err(DataError::Invalid(format!(
+                "grid resolution {res} is outside 1..={MAX_RES}"
+            )));
+        }
+        if !(scale > 0.0 && scale.is_finite() && threshold > 0.0 && threshold.is_finite()) {
+            return Err(DataError::Invalid(format!(
+                "band of a mesh: scale {scale} and threshold {threshold} must be positive"
+            )));
+        }
+        let n1 = res + 1;
+        let dims = [n1; 3];
+        let coords: Vec<f64> = (0..n1).map(|i| node_coord(i, res)).collect();
+        let nb = BandGrid::brick_dims_of(dims)[0];
+        let t = threshold / scale;
+        let same = std::ptr::eq(self, solid);
+        // Which bricks are near: a distance at the centre of a block of bricks bounds the
+        // distance at all its nodes; blocks of 8^3 bricks first, then the bricks of the near
+        // blocks.
+        let span = |lo: usize, hi: usize| (coords[lo], coords[(hi - 1).min(n1 - 1)]);
+        let near_box = |lo: [usize; 3], hi: [usize; 3], stack: &mut [(u32, f64); STACK]| {
+            let ext: [(f64, f64); 3] = std::array::from_fn(|a| span(lo[a], hi[a]));
+            let c = ext.map(|(a, b)| 0.5 * (a + b));
+            let r = ext.iter().map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt() * 0.5;
+            let reach = (t + r) * (1.0 + 1e-9) + 1e-12;
+            let d = self.nearest(c, None, stack).0.sqrt();
+            d < reach || (!same && solid.nearest(c, None, stack).0.sqrt() < reach)
+        };
+        let sb = 8 * BRICK;
+        let nsb = n1.div_ceil(sb);
+        let blocks: Vec<[usize; 3]> = (0..nsb * nsb * nsb)
+            .map(|b| [b / (nsb * nsb), (b / nsb) % nsb, b % nsb])
+            .collect();
+        let near_blocks: Vec<[usize; 3]> = blocks
+            .into_par_iter()
+            .filter(|b| {
+                let mut stack = [(0, 0.0); STACK];
+                let lo = b.map(|x| x * sb);
+                near_box(lo, lo.map(|x| (x + sb).min(n1)), &mut stack)
+            })
+            .collect();
+        let mut near = vec![false; nb * nb * nb];
+        let found: Vec<usize> = near_blocks
+            .par_iter()
+            .flat_map_iter(|b| {
+                let mut stack = [(0, 0.0); STACK];
+                let mut out = Vec::new();
+                for x in b[0] * 8..((b[0] + 1) * 8).min(nb) {
+                    for y in b[1] * 8..((b[1] + 1) * 8).min(nb) {
+                        for z in b[2] * 8..((b[2] + 1) * 8).min(nb) {
+                            let lo = [x, y, z].map(|v| v * BRICK);
+                            if near_box(lo, lo.map(|v| (v + BRICK).min(n1)), &mut stack) {
+                                out.push((x * nb + y) * nb + z);
+                            }
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        for b in found {
+            near[b] = true;
+        }
+        // Stored: within `reach` nodes (whole bricks) of a near brick.
+        let rb = reach.div_ceil(BRICK) as isize;
+        let mut stored = vec![false; near.len()];
+        for (b, _) in near.iter().enumerate().filter(|(_, n)| **n) {
+            let c = [b / (nb * nb), (b / nb) % nb, b % nb].map(|v| v as isize);
+            for dx in -rb..=rb {
+                for dy in -rb..=rb {
+                    for dz in -rb..=rb {
+                        let q = [c[0] + dx, c[1] + dy, c[2] + dz];
+                        if q.iter().all(|&v| v >= 0 && v < nb as isize) {
+                            stored[((q[0] as usize) * nb + q[1] as usize) * nb + q[2] as usize] =
+                                true;
+                        }
+                    }
+                }
+            }
+        }
+        let list: Vec<usize> = (0..stored.len()).filter(|&b| stored[b]).collect();
+        let slot_of = |b: usize| list.binary_search(&b).ok();
+        let brick_lo = |b: usize| [b / (nb * nb), (b / nb) % nb, b % nb].map(|v| v * BRICK);
+        // Unsigned distances at the stored nodes (padding: +inf).
+        let done = AtomicUsize::new(0);
+        let distances = |m: &MeshSdf, report: bool| -> Vec<f32> {
+            list.par_iter()
+                .flat_map_iter(|&b| {
+                    let lo = brick_lo(b);
+                    let mut stack = [(0, 0.0); STACK];
+                    let mut hint = None;
+                    let mut out = vec![f32::INFINITY; BRICK * BRICK * BRICK];
+                    for x in 0..BRICK {
+                        for y in 0..BRICK {
+                            for z in 0..BRICK {
+                                let [i, j, k] = [lo[0] + x, lo[1] + y, lo[2] + z];
+                                if i >= n1 || j >= n1 || k >= n1 {
+                                    continue;
+                                }
+                                let (d2, tri) =
+                                    m.nearest([coords[i], coords[j], coords[k]], hint, &mut stack);
+                                hint = Some(tri);
+                                out[(x * BRICK + y) * BRICK + z] = d2.sqrt() as f32;
+                            }
+                        }
+                    }
+                    if report {
+                        progress(done.fetch_add(1, Ordering::Relaxed) + 1, list.len());
+                    }
+                    out
+                })
+                .collect()
+        };
+        let own = distances(self, true);
+        let theirs = if same { None } else { Some(distances(solid, false)) };
+        let sd = theirs.as_deref().unwrap_or(&own);
+        let b3 = BRICK * BRICK * BRICK;
+        let node_of = |e: usize| -> [usize; 3] {
+            let lo = brick_lo(list[e / b3]);
+            let l = e % b3;
+            [lo[0] + l / (BRICK * BRICK), lo[1] + (l / BRICK) % BRICK, lo[2] + l % BRICK]
+        };
+        let elem_of = |i: usize, j: usize, k: usize| -> Option<usize> {
+            let b = ((i / BRICK) * nb + j / BRICK) * nb + k / BRICK;
+            slot_of(b).map(|s| s * b3 + ((i % BRICK) * BRICK + j % BRICK) * BRICK + k % BRICK)
+        };
+        let far: Vec<usize> = (0..stored.len()).filter(|&b| !stored[b]).collect();
+        let far_centre = |b: usize| {
+            let lo = brick_lo(b);
+            let c = lo.map(|v| (v + BRICK / 2).min(n1 - 1));
+            [coords[c[0]], coords[c[1]], coords[c[2]]]
+        };
+        let (inside_node, inside_far, ambiguous): (Vec<bool>, Vec<bool>, usize) =
+            if solid.chain_closed {
+                // Components over the stored nodes and the far bricks.
+                let ns = own.len();
+                let dsu = Dsu::new(ns + far.len());
+                let far_elem = |b: usize| far.binary_search(&b).ok().map(|f| (ns + f) as u32);
+                let free_sum = ((coords[1] - coords[0]) * (1.0 + 1e-6)) as f32;
+                (0..ns).into_par_iter().for_each(|e| {
+                    let da = sd[e];
+                    if da.is_infinite() {
+                        return;
+                    }
+                    let p = node_of(e);
+                    let pp = [coords[p[0]], coords[p[1]], coords[p[2]]];
+                    for a in 0..3 {
+                        for step in [-1isize, 1] {
+                            let v = p[a] as isize + step;
+                            if v < 0 || v >= n1 as isize {
+                                continue;
+                            }
+                            let mut q = p;
+                            q[a] = v as usize;
+                            match elem_of(q[0], q[1], q[2]) {
+                                Some(f) => {
+                                    if step < 0 {
+                                        continue;
+                                    }
+                                    let db = sd[f];
+                                    let qq = [coords[q[0]], coords[q[1]], coords[q[2]]];
+                                    if da + db > free_sum || !solid.segment_hits(pp, qq) {
+                                        dsu.union(e as u32, f as u32);
+                                    }
+                                }
+                                None => {
+                                    let b = ((q[0] / BRICK) * nb + q[1] / BRICK) * nb + q[2] / BRICK;
+                                    if let Some(f) = far_elem(b) {
+                                        dsu.union(e as u32, f);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                });
+                far.par_iter().enumerate().for_each(|(fi, &b)| {
+                    let c = [b / (nb * nb), (b / nb) % nb, b % nb];
+                    for a in 0..3 {
+                        if c[a] + 1 < nb {
+                            let mut q = c;
+                            q[a] += 1;
+                            if let Some(f) = far_elem((q[0] * nb + q[1]) * nb + q[2]) {
+                                dsu.union((ns + fi) as u32, f);
+                            }
+                        }
+                    }
+                });
+                let total = ns + far.len();
+                let root: Vec<u32> = (0..total as u32).into_par_iter().map(|a| dsu.find(a)).collect();
+                // Representative per root: a far brick's centre, else the farthest node.
+                let mut rep: HashMap<u32, (f32, usize)> = HashMap::new();
+                for (e, &r) in root.iter().enumerate() {
+                    let d = if e >= ns { f32::INFINITY } else { sd[e] };
+                    if d.is_infinite() && e < ns {
+                        continue;
+                    }
+                    let entry = rep.entry(r).or_insert((-1.0, usize::MAX));
+                    if d > entry.0 {
+                        *entry = (d, e);
+                    }
+                }
+                let reps: Vec<(u32, (f32, usize))> = rep.into_iter().collect();
+                let signs: HashMap<u32, bool> = reps
+                    .par_iter()
+                    .map(|&(r, (d, e))| {
+                        if !(d > 0.0) {
+                            return (r, false);
+                        }
+                        let p = if e >= ns {
+                            far_centre(far[e - ns])
+                        } else {
+                            let q = node_of(e);
+                            [coords[q[0]], coords[q[1]], coords[q[2]]]
+                        };
+                        (r, solid.winding_number(p).abs() > 0.5)
+                    })
+                    .collect();
+                let inside_node = (0..ns)
+                    .map(|e| sd[e] > 0.0 && signs.get(&root[e]).copied().unwrap_or(false))
+                    .collect();
+                let inside_far = (0..far.len())
+                    .map(|f| signs.get(&root[ns + f]).copied().unwrap_or(false))
+                    .collect();
+                (inside_node, inside_far, 0)
+            } else {
+                let w_node: Vec<(bool, usize)> = (0..own.len())
+                    .into_par_iter()
+                    .with_min_len(256)
+                    .map(|e| {
+                        if !(sd[e] > 0.0) || sd[e].is_infinite() {
+                            return (false, 0);
+                        }
+                        let q = node_of(e);
+                        let w = solid.winding_number([coords[q[0]], coords[q[1]], coords[q[2]]]).abs();
+                        (w > 0.5, usize::from((0.25..0.75).contains(&w)))
+                    })
+                    .collect();
+                let w_far: Vec<(bool, usize)> = far
+                    .par_iter()
+                    .map(|&b| {
+                        let w = solid.winding_number(far_centre(b)).abs();
+                        (w > 0.5, usize::from((0.25..0.75).contains(&w)))
+                    })
+                    .collect();
+                let amb = w_node.iter().chain(&w_far).map(|x| x.1).sum();
+                (
+                    w_node.into_iter().map(|x| x.0).collect(),
+                    w_far.into_iter().map(|x| x.0).collect(),
+                    amb,
+                )
+            };
+        let signed_nodes = inside_node.len() + inside_far.len();
+        let bricks: Vec<(usize, Vec<f64>)> = list
+            .iter()
+            .enumerate()
+            .map(|(s, &b)| {
+                let vals = (0..b3)
+                    .map(|l| {
+                        let e = s * b3 + l;
+                        let v = own[e];
+                        if !v.is_finite() {
+                            return 0.0;
+                        }
+                        let v = if inside_node[e] { -v.abs() } else { v };
+                        f64::from(v) * scale
+                    })
+                    .collect();
+                (b, vals)
+            })
+            .collect();
+        let grid = BandGrid::from_bricks(dims, threshold, reach, bricks, |b| {
+            far.binary_search(&b).is_ok_and(|f| inside_far[f])
+        })
+        .map_err(|e| DataError::Invalid(e.to_string()))?;
+        Ok(SdfBand {
+            grid,
+            open: solid.open,
+            ambiguous_nodes: ambiguous,
+            signed_nodes,
+        })
     }
 }
 

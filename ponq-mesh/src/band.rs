@@ -85,6 +85,24 @@ impl ValueStats {
         }
     }
 
+    fn add_many(&mut self, v: f64, n: u64) {
+        if n == 0 {
+            return;
+        }
+        self.add(v);
+        let more = n - 1;
+        self.nodes += more;
+        if v < 0.0 {
+            self.negative += more;
+        }
+        if v == self.min {
+            self.min_count += more;
+        }
+        if v == self.max {
+            self.max_count += more;
+        }
+    }
+
     /// Nodes equal to `v` when `v` is the smallest or the largest value, else `None`.
     pub fn count_of_extreme(&self, v: f64) -> Option<u64> {
         if v == self.min {
@@ -144,6 +162,88 @@ impl BandGrid {
             b.push_plane(p)?;
         }
         b.finish()
+    }
+
+    /// A band from its bricks, for values computed near a surface only (a mesh's distances,
+    /// a neural field): `stored` lists `(brick, values)` (bricks in C order over
+    /// [`BandGrid::brick_dims_of`], [`BRICK`]^3 values each in brick-local C order; padding past
+    /// the grid is ignored); every other brick is far, negative where `far_negative(brick)`.
+    /// The caller guarantees the invariants of [`BandGrid`] for `threshold` and `reach`. The
+    /// statistics count the far nodes as `±threshold` (their values are unknown).
+    ///
+    /// # Errors
+    /// A brick out of range or listed twice, a values block of another size, a non-finite
+    /// value, and the errors of [`BandBuilder::new`].
+    pub fn from_bricks(
+        dims: [usize; 3],
+        threshold: f64,
+        reach: usize,
+        mut stored: Vec<(usize, Vec<f64>)>,
+        far_negative: impl Fn(usize) -> bool,
+    ) -> Result<Self> {
+        let b = BandBuilder::new(dims, 1.0, threshold, reach)?;
+        let bricks = b.bricks;
+        let nb = bricks.iter().product::<usize>();
+        stored.sort_unstable_by_key(|x| x.0);
+        if stored.windows(2).any(|w| w[0].0 == w[1].0) || stored.last().is_some_and(|x| x.0 >= nb)
+        {
+            return Err(Error::InvalidInput(
+                "band bricks listed twice or out of range".into(),
+            ));
+        }
+        let mut slots = vec![FAR_POS; nb];
+        let mut values = Vec::with_capacity(stored.len() * B3);
+        let mut stats = ValueStats::default();
+        let [_, b1, b2] = bricks;
+        let extent = |b: usize| -> [usize; 3] {
+            let bc = [b / (b1 * b2), (b / b2) % b1, b % b2];
+            std::array::from_fn(|a| (dims[a] - bc[a] * BRICK).min(BRICK))
+        };
+        for (slot, (b, v)) in stored.into_iter().enumerate() {
+            if v.len() != B3 {
+                return Err(Error::InvalidInput(format!(
+                    "a brick of {} values, expected {B3}",
+                    v.len()
+                )));
+            }
+            let e = extent(b);
+            for x in 0..e[0] {
+                for y in 0..e[1] {
+                    for &val in &v[(x * BRICK + y) * BRICK..(x * BRICK + y) * BRICK + e[2]] {
+                        if !val.is_finite() {
+                            return Err(Error::InvalidInput(format!(
+                                "a non-finite value ({val}) in brick {b}"
+                            )));
+                        }
+                        stats.add(val);
+                    }
+                }
+            }
+            slots[b] = slot as u32;
+            values.extend_from_slice(&v);
+        }
+        for (b, s) in slots.iter_mut().enumerate() {
+            if *s == FAR_POS {
+                let neg = far_negative(b);
+                *s = if neg { FAR_NEG } else { FAR_POS };
+                let v = if neg { -threshold } else { threshold };
+                stats.add_many(v, extent(b).iter().product::<usize>() as u64);
+            }
+        }
+        Ok(Self {
+            dims,
+            bricks,
+            slots,
+            values,
+            threshold,
+            reach,
+            stats,
+        })
+    }
+
+    /// Bricks per axis of a grid of `dims` nodes.
+    pub fn brick_dims_of(dims: [usize; 3]) -> [usize; 3] {
+        dims.map(|d| d.div_ceil(BRICK))
     }
 
     /// Nodes per axis.

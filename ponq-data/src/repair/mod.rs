@@ -341,6 +341,35 @@ impl Repaired {
     }
 }
 
+impl Repaired {
+    /// [`Repaired::grid`] near the surface only ([`MeshSdf::band_signed_by`]).
+    ///
+    /// # Errors
+    /// As [`MeshSdf::band_signed_by`].
+    pub fn band(
+        &self,
+        map: impl Fn(&TriMesh) -> TriMesh,
+        res: usize,
+        scale: f64,
+        threshold: f64,
+        reach: usize,
+        progress: impl Fn(usize, usize) + Sync,
+    ) -> Result<crate::sdf::SdfBand> {
+        let sdf = MeshSdf::new(&map(&self.mesh))?;
+        match &self.solid {
+            Some(s) => sdf.band_signed_by(
+                &MeshSdf::new(&map(s))?,
+                res,
+                scale,
+                threshold,
+                reach,
+                progress,
+            ),
+            None => sdf.band_signed_by(&sdf, res, scale, threshold, reach, progress),
+        }
+    }
+}
+
 /// [`repair`], with the closed surface that signs the result where faces were removed.
 ///
 /// # Errors

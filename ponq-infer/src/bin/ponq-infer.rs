@@ -8,9 +8,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
-use ponq_infer::mesh_input::{MeshInput, mesh_grid};
+use ponq_infer::mesh_input::{MeshInput, mesh_band};
 use ponq_infer::reconstruct::band_parameters;
-use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict, predict_band, shipped};
+use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict_band, shipped};
 use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::{io, validity};
@@ -152,21 +152,6 @@ fn bar(quiet: bool, template: &str) -> ProgressBar {
     pb
 }
 
-/// The grid as read: a mesh's dense grid, or a file's band.
-enum Input {
-    Dense(ponq_mesh::io::npy::Grid3),
-    Band(ponq_mesh::band::BandGrid),
-}
-
-impl Input {
-    fn dims(&self) -> [usize; 3] {
-        match self {
-            Self::Dense(g) => g.dims,
-            Self::Band(b) => b.dims(),
-        }
-    }
-}
-
 fn is_mesh_path(p: &Path) -> bool {
     ponq_mesh::io::MeshFormat::from_path(p).is_some()
 }
@@ -274,15 +259,24 @@ fn run(args: &Args) -> Result<Outcome> {
         let res = args.res.unwrap_or(64);
         let pb = bar(
             args.quiet,
-            "sdf {bar:30} {percent:>3}% of {len} nodes [{elapsed} < {eta}]",
+            "sdf near the surface {bar:30} {pos}/{len} bricks [{elapsed} < {eta}]",
         );
-        pb.set_length(((res + 1) as u64).pow(3));
         let input = MeshInput {
             open_surface: args.open.is_some(),
             repair: !args.no_repair,
         };
-        let g = mesh_grid(&mesh, res, input, |n| pb.set_position(n as u64))
-            .with_context(|| format!("the input mesh {}", args.input.display()))?;
+        let g = mesh_band(
+            &mesh,
+            res,
+            input,
+            net_cfg.encoder_layers,
+            &opts,
+            |done, total| {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            },
+        )
+        .with_context(|| format!("the input mesh {}", args.input.display()))?;
         pb.finish_and_clear();
         if let Some(r) = &g.report {
             if !args.quiet && (r.found_defects() || r.ambiguous_node_share.is_some()) {
@@ -299,7 +293,7 @@ fn run(args: &Args) -> Result<Outcome> {
                  number (--open culls the triangles away from the surface)"
             );
         }
-        (Input::Dense(g.grid), Some(g.normalization))
+        (g.grid, Some(g.normalization))
     } else {
         let pb = bar(
             args.quiet,
@@ -320,7 +314,7 @@ fn run(args: &Args) -> Result<Outcome> {
         )
         .with_context(|| format!("cannot read the SDF grid {}", args.input.display()))?;
         pb.finish_and_clear();
-        (Input::Band(band), None)
+        (band, None)
     };
     let read_time = t.elapsed();
     if (args.lite || args.coarsen > 0) && args.refine == RefineMode::On {
@@ -332,10 +326,7 @@ fn run(args: &Args) -> Result<Outcome> {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
     };
-    let predicted = match grid {
-        Input::Dense(g) => predict(&net, net_cfg.encoder_layers, &g, &opts, &dev, tick),
-        Input::Band(b) => predict_band(&net, net_cfg.encoder_layers, b, &opts, &dev, tick),
-    };
+    let predicted = predict_band(&net, net_cfg.encoder_layers, grid, &opts, &dev, tick);
     let predicted = match predicted {
         Ok(r) => r,
         Err(e) if e.to_string().contains("no sign change") => {

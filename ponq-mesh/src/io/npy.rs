@@ -200,6 +200,41 @@ pub fn write_npy_grid_f32(path: impl AsRef<Path>, grid: &Grid3) -> Result<()> {
     })
 }
 
+/// Writes a [`BandGrid`] to `path` as a dense C-order `float32` `.npy` file, plane by plane
+/// (no dense copy in memory), each value clamped to `[-clamp, clamp]` when given: with the
+/// band's threshold, a truncated signed distance.
+///
+/// Errors: [`Error::InvalidInput`] when a value overflows `f32`; [`Error::Io`] (naming the
+/// file) when writing fails.
+pub fn write_npy_band_f32(
+    path: impl AsRef<Path>,
+    grid: &BandGrid,
+    clamp: Option<f64>,
+) -> Result<()> {
+    let path = path.as_ref();
+    let [d0, d1, d2] = grid.dims();
+    let big = grid.stats().min.abs().max(grid.stats().max.abs());
+    if !(big as f32).is_finite() {
+        return Err(Error::InvalidInput(format!(
+            "a grid value ({big}) overflows f32"
+        )));
+    }
+    let shape = grid.dims().map(|d| d as u64);
+    let c = clamp.unwrap_or(f64::INFINITY);
+    write_file(path, |w| {
+        let mut npy = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&shape)
+            .writer(w)
+            .begin_nd()?;
+        for i in 0..d0 {
+            let plane = grid.block([i, 0, 0], [i, d1 - 1, d2 - 1]);
+            npy.extend(plane.iter().map(|&v| v.clamp(-c, c) as f32))?;
+        }
+        npy.finish()
+    })
+}
+
 /// Formats a shape like NumPy: `(3,)`, `(2, 3)`.
 pub fn shape_str(shape: &[usize]) -> String {
     match shape {

@@ -150,10 +150,12 @@ struct SdfArgs {
     json: Option<PathBuf>,
     /// Compute exact distances only within CELLS cells of the surface and write a truncated
     /// signed distance (values clamped to +-CELLS cells, the sign everywhere): work and
-    /// memory follow the surface, not the grid's volume (a 1025^3 grid in seconds). 8 cells
-    /// (the default of the flag) cover everything `ponq-infer` reads, so it gives the same
-    /// mesh as on the dense grid. The file is still a dense float32 array.
-    #[arg(long, value_name = "CELLS", num_args = 0..=1, default_missing_value = "8")]
+    /// memory follow the surface, not the grid's volume (a 1025^3 grid in seconds). 10 cells
+    /// (the default of the flag) cover everything `ponq-infer` reads (the cells it can keep,
+    /// 1.7 cells from the surface, and the encoder's 4 nodes along each axis around them:
+    /// up to 8.7 cells), so it gives the same mesh as on the dense grid. The file is still a
+    /// dense float32 array.
+    #[arg(long, value_name = "CELLS", num_args = 0..=1, default_missing_value = "10")]
     band: Option<f64>,
     /// Print nothing but errors and warnings (no progress bar, no summary, no defect report).
     #[arg(short, long)]

@@ -4,7 +4,7 @@ The docstrings of the functions themselves (``help(ponq.infer)``) describe every
 """
 
 import os
-from typing import Any, Dict, Literal, Optional, Sequence, Tuple, Union, overload
+from typing import Any, Callable, Dict, Literal, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +50,21 @@ def infer(
     return_ponq: Literal[True],
     check: bool = True,
 ) -> Tuple[Float64Array, Int64Array, PoNQDict]: ...
+def infer_field(
+    f: Callable[[Float64Array], npt.ArrayLike],
+    res: int,
+    *,
+    bounds: Bounds = None,
+    lipschitz: float = 1.0,
+    batch: int = 65536,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, Dict[str, int]]: ...
 def mesh(
     points: npt.ArrayLike,
     normals: npt.ArrayLike,

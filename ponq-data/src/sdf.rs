@@ -883,7 +883,12 @@ impl MeshSdf {
         let near_box = |lo: [usize; 3], hi: [usize; 3], stack: &mut [(u32, f64); STACK]| {
             let ext: [(f64, f64); 3] = std::array::from_fn(|a| span(lo[a], hi[a]));
             let c = ext.map(|(a, b)| 0.5 * (a + b));
-            let r = ext.iter().map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt() * 0.5;
+            let r = ext
+                .iter()
+                .map(|(a, b)| (b - a) * (b - a))
+                .sum::<f64>()
+                .sqrt()
+                * 0.5;
             let reach = (t + r) * (1.0 + 1e-9) + 1e-12;
             let d = self.nearest(c, None, stack).0.sqrt();
             d < reach || (!same && solid.nearest(c, None, stack).0.sqrt() < reach)
@@ -974,13 +979,21 @@ impl MeshSdf {
                 .collect()
         };
         let own = distances(self, true);
-        let theirs = if same { None } else { Some(distances(solid, false)) };
+        let theirs = if same {
+            None
+        } else {
+            Some(distances(solid, false))
+        };
         let sd = theirs.as_deref().unwrap_or(&own);
         let b3 = BRICK * BRICK * BRICK;
         let node_of = |e: usize| -> [usize; 3] {
             let lo = brick_lo(list[e / b3]);
             let l = e % b3;
-            [lo[0] + l / (BRICK * BRICK), lo[1] + (l / BRICK) % BRICK, lo[2] + l % BRICK]
+            [
+                lo[0] + l / (BRICK * BRICK),
+                lo[1] + (l / BRICK) % BRICK,
+                lo[2] + l % BRICK,
+            ]
         };
         let elem_of = |i: usize, j: usize, k: usize| -> Option<usize> {
             let b = ((i / BRICK) * nb + j / BRICK) * nb + k / BRICK;
@@ -992,125 +1005,131 @@ impl MeshSdf {
             let c = lo.map(|v| (v + BRICK / 2).min(n1 - 1));
             [coords[c[0]], coords[c[1]], coords[c[2]]]
         };
-        let (inside_node, inside_far, ambiguous): (Vec<bool>, Vec<bool>, usize) =
-            if solid.chain_closed {
-                // Components over the stored nodes and the far bricks.
-                let ns = own.len();
-                let dsu = Dsu::new(ns + far.len());
-                let far_elem = |b: usize| far.binary_search(&b).ok().map(|f| (ns + f) as u32);
-                let free_sum = ((coords[1] - coords[0]) * (1.0 + 1e-6)) as f32;
-                (0..ns).into_par_iter().for_each(|e| {
-                    let da = sd[e];
-                    if da.is_infinite() {
-                        return;
-                    }
-                    let p = node_of(e);
-                    let pp = [coords[p[0]], coords[p[1]], coords[p[2]]];
-                    for a in 0..3 {
-                        for step in [-1isize, 1] {
-                            let v = p[a] as isize + step;
-                            if v < 0 || v >= n1 as isize {
-                                continue;
-                            }
-                            let mut q = p;
-                            q[a] = v as usize;
-                            match elem_of(q[0], q[1], q[2]) {
-                                Some(f) => {
-                                    if step < 0 {
-                                        continue;
-                                    }
-                                    let db = sd[f];
-                                    let qq = [coords[q[0]], coords[q[1]], coords[q[2]]];
-                                    if da + db > free_sum || !solid.segment_hits(pp, qq) {
-                                        dsu.union(e as u32, f as u32);
-                                    }
+        let (inside_node, inside_far, ambiguous): (Vec<bool>, Vec<bool>, usize) = if solid
+            .chain_closed
+        {
+            // Components over the stored nodes and the far bricks.
+            let ns = own.len();
+            let dsu = Dsu::new(ns + far.len());
+            let far_elem = |b: usize| far.binary_search(&b).ok().map(|f| (ns + f) as u32);
+            let free_sum = ((coords[1] - coords[0]) * (1.0 + 1e-6)) as f32;
+            (0..ns).into_par_iter().for_each(|e| {
+                let da = sd[e];
+                if da.is_infinite() {
+                    return;
+                }
+                let p = node_of(e);
+                let pp = [coords[p[0]], coords[p[1]], coords[p[2]]];
+                for a in 0..3 {
+                    for step in [-1isize, 1] {
+                        let v = p[a] as isize + step;
+                        if v < 0 || v >= n1 as isize {
+                            continue;
+                        }
+                        let mut q = p;
+                        q[a] = v as usize;
+                        match elem_of(q[0], q[1], q[2]) {
+                            Some(f) => {
+                                if step < 0 {
+                                    continue;
                                 }
-                                None => {
-                                    let b = ((q[0] / BRICK) * nb + q[1] / BRICK) * nb + q[2] / BRICK;
-                                    if let Some(f) = far_elem(b) {
-                                        dsu.union(e as u32, f);
-                                    }
+                                let db = sd[f];
+                                let qq = [coords[q[0]], coords[q[1]], coords[q[2]]];
+                                if da + db > free_sum || !solid.segment_hits(pp, qq) {
+                                    dsu.union(e as u32, f as u32);
+                                }
+                            }
+                            None => {
+                                let b = ((q[0] / BRICK) * nb + q[1] / BRICK) * nb + q[2] / BRICK;
+                                if let Some(f) = far_elem(b) {
+                                    dsu.union(e as u32, f);
                                 }
                             }
                         }
-                    }
-                });
-                far.par_iter().enumerate().for_each(|(fi, &b)| {
-                    let c = [b / (nb * nb), (b / nb) % nb, b % nb];
-                    for a in 0..3 {
-                        if c[a] + 1 < nb {
-                            let mut q = c;
-                            q[a] += 1;
-                            if let Some(f) = far_elem((q[0] * nb + q[1]) * nb + q[2]) {
-                                dsu.union((ns + fi) as u32, f);
-                            }
-                        }
-                    }
-                });
-                let total = ns + far.len();
-                let root: Vec<u32> = (0..total as u32).into_par_iter().map(|a| dsu.find(a)).collect();
-                // Representative per root: a far brick's centre, else the farthest node.
-                let mut rep: HashMap<u32, (f32, usize)> = HashMap::new();
-                for (e, &r) in root.iter().enumerate() {
-                    let d = if e >= ns { f32::INFINITY } else { sd[e] };
-                    if d.is_infinite() && e < ns {
-                        continue;
-                    }
-                    let entry = rep.entry(r).or_insert((-1.0, usize::MAX));
-                    if d > entry.0 {
-                        *entry = (d, e);
                     }
                 }
-                let reps: Vec<(u32, (f32, usize))> = rep.into_iter().collect();
-                let signs: HashMap<u32, bool> = reps
-                    .par_iter()
-                    .map(|&(r, (d, e))| {
-                        if !(d > 0.0) {
-                            return (r, false);
+            });
+            far.par_iter().enumerate().for_each(|(fi, &b)| {
+                let c = [b / (nb * nb), (b / nb) % nb, b % nb];
+                for a in 0..3 {
+                    if c[a] + 1 < nb {
+                        let mut q = c;
+                        q[a] += 1;
+                        if let Some(f) = far_elem((q[0] * nb + q[1]) * nb + q[2]) {
+                            dsu.union((ns + fi) as u32, f);
                         }
-                        let p = if e >= ns {
-                            far_centre(far[e - ns])
-                        } else {
-                            let q = node_of(e);
-                            [coords[q[0]], coords[q[1]], coords[q[2]]]
-                        };
-                        (r, solid.winding_number(p).abs() > 0.5)
-                    })
-                    .collect();
-                let inside_node = (0..ns)
-                    .map(|e| sd[e] > 0.0 && signs.get(&root[e]).copied().unwrap_or(false))
-                    .collect();
-                let inside_far = (0..far.len())
-                    .map(|f| signs.get(&root[ns + f]).copied().unwrap_or(false))
-                    .collect();
-                (inside_node, inside_far, 0)
-            } else {
-                let w_node: Vec<(bool, usize)> = (0..own.len())
-                    .into_par_iter()
-                    .with_min_len(256)
-                    .map(|e| {
-                        if !(sd[e] > 0.0) || sd[e].is_infinite() {
-                            return (false, 0);
-                        }
+                    }
+                }
+            });
+            let total = ns + far.len();
+            let root: Vec<u32> = (0..total as u32)
+                .into_par_iter()
+                .map(|a| dsu.find(a))
+                .collect();
+            // Representative per root: a far brick's centre, else the farthest node.
+            let mut rep: HashMap<u32, (f32, usize)> = HashMap::new();
+            for (e, &r) in root.iter().enumerate() {
+                let d = if e >= ns { f32::INFINITY } else { sd[e] };
+                if d.is_infinite() && e < ns {
+                    continue;
+                }
+                let entry = rep.entry(r).or_insert((-1.0, usize::MAX));
+                if d > entry.0 {
+                    *entry = (d, e);
+                }
+            }
+            let reps: Vec<(u32, (f32, usize))> = rep.into_iter().collect();
+            let signs: HashMap<u32, bool> = reps
+                .par_iter()
+                .map(|&(r, (d, e))| {
+                    if !(d > 0.0) {
+                        return (r, false);
+                    }
+                    let p = if e >= ns {
+                        far_centre(far[e - ns])
+                    } else {
                         let q = node_of(e);
-                        let w = solid.winding_number([coords[q[0]], coords[q[1]], coords[q[2]]]).abs();
-                        (w > 0.5, usize::from((0.25..0.75).contains(&w)))
-                    })
-                    .collect();
-                let w_far: Vec<(bool, usize)> = far
-                    .par_iter()
-                    .map(|&b| {
-                        let w = solid.winding_number(far_centre(b)).abs();
-                        (w > 0.5, usize::from((0.25..0.75).contains(&w)))
-                    })
-                    .collect();
-                let amb = w_node.iter().chain(&w_far).map(|x| x.1).sum();
-                (
-                    w_node.into_iter().map(|x| x.0).collect(),
-                    w_far.into_iter().map(|x| x.0).collect(),
-                    amb,
-                )
-            };
+                        [coords[q[0]], coords[q[1]], coords[q[2]]]
+                    };
+                    (r, solid.winding_number(p).abs() > 0.5)
+                })
+                .collect();
+            let inside_node = (0..ns)
+                .map(|e| sd[e] > 0.0 && signs.get(&root[e]).copied().unwrap_or(false))
+                .collect();
+            let inside_far = (0..far.len())
+                .map(|f| signs.get(&root[ns + f]).copied().unwrap_or(false))
+                .collect();
+            (inside_node, inside_far, 0)
+        } else {
+            let w_node: Vec<(bool, usize)> = (0..own.len())
+                .into_par_iter()
+                .with_min_len(256)
+                .map(|e| {
+                    if !(sd[e] > 0.0) || sd[e].is_infinite() {
+                        return (false, 0);
+                    }
+                    let q = node_of(e);
+                    let w = solid
+                        .winding_number([coords[q[0]], coords[q[1]], coords[q[2]]])
+                        .abs();
+                    (w > 0.5, usize::from((0.25..0.75).contains(&w)))
+                })
+                .collect();
+            let w_far: Vec<(bool, usize)> = far
+                .par_iter()
+                .map(|&b| {
+                    let w = solid.winding_number(far_centre(b)).abs();
+                    (w > 0.5, usize::from((0.25..0.75).contains(&w)))
+                })
+                .collect();
+            let amb = w_node.iter().chain(&w_far).map(|x| x.1).sum();
+            (
+                w_node.into_iter().map(|x| x.0).collect(),
+                w_far.into_iter().map(|x| x.0).collect(),
+                amb,
+            )
+        };
         let signed_nodes = inside_node.len() + inside_far.len();
         let bricks: Vec<(usize, Vec<f64>)> = list
             .iter()

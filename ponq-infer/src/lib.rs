@@ -9,6 +9,7 @@
 //! - [`reconstruct`]: prediction -> PoNQ (kept cells, PoNQ-lite / hierarchy) -> `ponq_mesh`
 //!   (Delaunay -> tags -> min cut -> mesh) -> refinement against the grid's exact distances
 //!   (`ponq_data::refine`, when the grid is a true signed distance) -> mesh;
+//! - [`field`]: a signed distance function (a neural field) evaluated near its surface only;
 //! - [`mesh_input`]: a mesh as the input (normalised, its exact SDF grid computed);
 //! - [`shipped`]: the model in the repository's `models/` folder, also built into the program.
 //!
@@ -24,6 +25,7 @@
 //! println!("{} faces", out.mesh.faces.len());
 //! ```
 
+pub mod field;
 pub mod frame;
 pub mod mesh_input;
 pub mod reconstruct;

@@ -84,8 +84,16 @@ fn mesh_band_matches_the_dense_grid() {
         }
     });
     let cases = [
-        (io::read_mesh(repo("examples/example001.obj")).unwrap(), 40, MeshInput::default()),
-        (io::read_mesh(repo("examples/csg.obj")).unwrap(), 33, MeshInput::default()),
+        (
+            io::read_mesh(repo("examples/example001.obj")).unwrap(),
+            40,
+            MeshInput::default(),
+        ),
+        (
+            io::read_mesh(repo("examples/csg.obj")).unwrap(),
+            33,
+            MeshInput::default(),
+        ),
         (
             open_box,
             24,
@@ -124,13 +132,20 @@ fn mesh_band_matches_the_dense_grid() {
         assert!(checked > 0);
         if !input.open_surface {
             let a = finish(
-                &predict_band(&net, cfg.encoder_layers, band.grid, &opts, &dev, |_, _| {})
-                    .unwrap(),
+                &predict_band(&net, cfg.encoder_layers, band.grid, &opts, &dev, |_, _| {}).unwrap(),
                 &opts,
             )
             .unwrap();
             let b = finish(
-                &predict(&net, cfg.encoder_layers, &dense.grid, &opts, &dev, |_, _| {}).unwrap(),
+                &predict(
+                    &net,
+                    cfg.encoder_layers,
+                    &dense.grid,
+                    &opts,
+                    &dev,
+                    |_, _| {},
+                )
+                .unwrap(),
                 &opts,
             )
             .unwrap();

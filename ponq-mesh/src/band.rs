@@ -185,8 +185,7 @@ impl BandGrid {
         let bricks = b.bricks;
         let nb = bricks.iter().product::<usize>();
         stored.sort_unstable_by_key(|x| x.0);
-        if stored.windows(2).any(|w| w[0].0 == w[1].0) || stored.last().is_some_and(|x| x.0 >= nb)
-        {
+        if stored.windows(2).any(|w| w[0].0 == w[1].0) || stored.last().is_some_and(|x| x.0 >= nb) {
             return Err(Error::InvalidInput(
                 "band bricks listed twice or out of range".into(),
             ));

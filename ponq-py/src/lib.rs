@@ -7,7 +7,8 @@
 //!
 //! The modules: `errors` (why a call failed, running work without the GIL), `arrays` (NumPy
 //! arrays in and out, checked as the programs check files), `options` (shared keyword
-//! arguments), then one module per family of functions: `inference` (`infer`), `meshing`
+//! arguments), then one module per family of functions: `inference` (`infer`), `field`
+//! (`infer_field`: a signed distance function evaluated near its surface only), `meshing`
 //! (`mesh`, `marching_cubes`), `data` (`sdf`, `sample`, `fit`), `evaluation` (`metrics`,
 //! `check`).
 
@@ -15,6 +16,7 @@ mod arrays;
 mod data;
 mod errors;
 mod evaluation;
+mod field;
 mod inference;
 mod meshing;
 mod options;
@@ -24,7 +26,8 @@ use pyo3::prelude::*;
 /// PoNQ-rs for Python: sharp, watertight meshes from signed distance grids with the PoNQ
 /// network (CVPR 2024), and the tools around it, on NumPy arrays.
 ///
-/// Functions: ``infer`` (SDF grid -> mesh, the ``ponq-infer`` program), ``mesh`` (PoNQ
+/// Functions: ``infer`` (SDF grid -> mesh, the ``ponq-infer`` program), ``infer_field``
+/// (a signed distance function, e.g. a neural field -> mesh), ``mesh`` (PoNQ
 /// arrays -> mesh, ``ponq-mesh``), ``sdf`` (mesh -> exact SDF grid, ``ponq-prep sdf``),
 /// ``sample`` (surface samples), ``fit`` (mesh -> fitted PoNQ -> mesh, ``ponq-fit``),
 /// ``metrics`` (``ponq-eval compare``), ``check`` (validity), ``marching_cubes``.
@@ -48,6 +51,7 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
         ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG,
     )?;
     m.add_function(wrap_pyfunction!(inference::infer, m)?)?;
+    m.add_function(wrap_pyfunction!(field::infer_field, m)?)?;
     m.add_function(wrap_pyfunction!(meshing::mesh, m)?)?;
     m.add_function(wrap_pyfunction!(data::sdf, m)?)?;
     m.add_function(wrap_pyfunction!(data::sample, m)?)?;
@@ -62,6 +66,7 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
             "__version__",
             "DEFAULT_MERGE_SMOOTH",
             "infer",
+            "infer_field",
             "mesh",
             "sdf",
             "sample",

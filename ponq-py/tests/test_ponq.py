@@ -442,3 +442,77 @@ def test_docstrings():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         ponq.check(*cube_mesh())
+
+
+def _box_sphere(p):
+    """Exact SDF of the union of a box (half size 0.45) and a sphere (radius 0.35 at x=0.4),
+    any array of points (N, 3)."""
+    p = np.asarray(p, dtype=np.float64)
+    q = np.abs(p) - 0.45
+    box = np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+    sphere = np.linalg.norm(p - np.array([0.4, 0.0, 0.0]), axis=1) - 0.35
+    return np.minimum(box, sphere)
+
+
+def test_infer_field_evaluates_near_the_surface_and_meshes_as_the_dense_grid():
+    res = 40
+    calls = []
+
+    def f(p):
+        assert p.shape[1] == 3 and p.dtype == np.float64 and len(p) <= 4096
+        calls.append(len(p))
+        return _box_sphere(p)
+
+    v, faces, stats = ponq.infer_field(f, res, batch=4096)
+    assert stats["calls"] == len(calls) and stats["points"] == sum(calls)
+    assert stats["dense_points"] == (res + 1) ** 3
+    # The grid's nodes, as the function places them: lo + i * h.
+    lo, h = -1.0, 2.0 / res
+    ax = lo + np.arange(res + 1) * h
+    grid = _box_sphere(np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3))
+    vd, fd = ponq.infer(grid.reshape(res + 1, res + 1, res + 1))
+    assert np.array_equal(v, vd) and np.array_equal(faces, fd)
+    assert ponq.check(v, faces)["valid"]
+    # The share of the grid evaluated falls about as 1 / res (the band's thickness in
+    # cells stays the same).
+    share = []
+    for r in (80, 160):
+        _, _, s = ponq.infer_field(_box_sphere, r, refine="off")
+        share.append(s["points"] / s["dense_points"])
+    assert share[1] < 0.4 and share[1] < 0.65 * share[0], share
+
+
+def test_infer_field_errors_are_clear():
+    with pytest.raises(ValueError, match="values for"):
+        ponq.infer_field(lambda p: np.zeros(3), 16)
+    with pytest.raises(ValueError, match="no sign change"):
+        ponq.infer_field(lambda p: np.ones(len(p)), 16)
+
+    def boom(p):
+        raise KeyError("from the field")
+
+    with pytest.raises(KeyError, match="from the field"):
+        ponq.infer_field(boom, 16)
+
+
+def test_infer_field_takes_a_torch_module():
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed here")
+
+    class Sphere(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.lin = torch.nn.Linear(3, 3)
+            with torch.no_grad():
+                self.lin.weight.copy_(torch.eye(3))
+                self.lin.bias.zero_()
+
+        def forward(self, x):
+            return self.lin(x).norm(dim=1) - 0.6
+
+    net = Sphere()
+    with torch.no_grad():
+        v, faces, stats = ponq.infer_field(
+            lambda p: net(torch.from_numpy(p).float()).numpy(), 48, batch=10000
+        )
+    assert ponq.check(v, faces)["valid"]
+    assert stats["points"] < stats["dense_points"]

@@ -207,8 +207,10 @@ fn write_band(
     }
     let t = cells * 2.0 / a.res as f64;
     bar.set_style(
-        ProgressStyle::with_template("sdf near the surface {bar:40} {pos}/{len} bricks [{elapsed} < {eta}]")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ProgressStyle::with_template(
+            "sdf near the surface {bar:40} {pos}/{len} bricks [{elapsed} < {eta}]",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let tick = |done: usize, total: usize| {
         bar.set_length(total as u64);

@@ -90,3 +90,48 @@ fn sdf_errors_are_clear() {
     assert!(!out.exists());
     std::fs::remove_file(&bad).unwrap();
 }
+
+/// `--band`: the distances within the band equal the dense grid's, the rest is the dense
+/// grid truncated to the band's width with the same sign, for a closed part (sign by
+/// components) and the same part without repair.
+#[test]
+fn band_writes_a_truncated_grid_equal_to_the_dense_one_near_the_surface() {
+    for (res, cells) in [(48usize, 3.0f64), (64, 10.0)] {
+        let dense = tmp(&format!("dense{res}.npy"));
+        let band = tmp(&format!("band{res}.npy"));
+        for (out, extra) in [(&dense, None), (&band, Some(cells.to_string()))] {
+            let mut c = prep();
+            c.args(["sdf", "-q", "--res", &res.to_string(), "-o"])
+                .arg(out);
+            if let Some(w) = &extra {
+                c.args(["--band", w]);
+            }
+            assert!(c.arg(example("example001.obj")).status().unwrap().success());
+        }
+        let d = io::npy::read_npy_grid(&dense).unwrap();
+        let b = io::npy::read_npy_grid(&band).unwrap();
+        let t = cells * 2.0 / res as f64;
+        let mut near = 0;
+        for (x, y) in d.data.iter().zip(&b.data) {
+            if x.abs() < t * 0.999 {
+                assert_eq!(x, y);
+                near += 1;
+            } else {
+                assert_eq!(*y, (x.clamp(-t, t) as f32) as f64, "{x} -> {y}");
+            }
+        }
+        assert!(
+            near > 0 && near < d.data.len() / 2,
+            "{near} of {}",
+            d.data.len()
+        );
+    }
+    let e = prep()
+        .args(["sdf", "-q", "--band", "0.5", "-o"])
+        .arg(tmp("bad.npy"))
+        .arg(example("example001.obj"))
+        .output()
+        .unwrap();
+    assert_eq!(e.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&e.stderr).contains("--band"));
+}

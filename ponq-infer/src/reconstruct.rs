@@ -240,6 +240,30 @@ pub fn band_parameters(n: usize, encoder_layers: usize, opts: &InferOptions) -> 
     (t * (1.0 + 1e-9), encoder_layers.max(BAND_REACH) + 1)
 }
 
+/// Memory one cell near the surface takes from the network to the end of the refinement,
+/// measured with `ponq-infer` on the shared bunny at 513^3 (peak resident memory 1.32 GB for
+/// 484k cells of 4 points, a band of 71 MB: 570 bytes a point), with a margin.
+const BYTES_PER_CLOSE_POINT: u64 = 700;
+
+/// Refuses a run whose cells near the surface would take more memory than is available
+/// (`ponq_mesh::memory::available_bytes`), before any work.
+fn check_memory(band: &BandGrid, close: usize, points_per_cell: usize) -> Result<()> {
+    let need =
+        band.memory_bytes() as u64 + close as u64 * points_per_cell as u64 * BYTES_PER_CLOSE_POINT;
+    if let Some(avail) = ponq_mesh::memory::available_bytes()
+        && need > avail
+    {
+        bail!(
+            "not enough memory: {close} cells near the surface need about {} and {} is \
+             available (PONQ_MEMORY_LIMIT or the system's available memory); mesh a coarser \
+             grid, or --coarsen 1 (PoNQ-lite at half the resolution)",
+            ponq_mesh::memory::gb(need),
+            ponq_mesh::memory::gb(avail)
+        );
+    }
+    Ok(())
+}
+
 /// A cell can be kept when all its corners are closer than this (normalised frame) to the
 /// surface.
 fn close_threshold(n: usize) -> f64 {
@@ -319,6 +343,7 @@ pub fn predict_band(
         }
     });
     close.sort_unstable();
+    check_memory(&band, close.len(), net.points_per_cell())?;
     let t0 = Instant::now();
     let (pred, tiles) = predict_cells(
         net,

@@ -41,7 +41,8 @@ fn band_reading_gives_the_whole_grids_mesh() {
             BandGrid::from_dense(dense.dims, &dense.data, frame.scale(), f64::INFINITY, reach)
                 .unwrap();
         let streamed =
-            io::npy::read_npy_band(&path, |_| Ok((frame.scale(), t, reach)), |_, _| {}).unwrap();
+            io::npy::read_npy_band(&path, |_| Ok((frame.scale(), t, reach, None)), |_, _| {})
+                .unwrap();
         assert!(
             streamed.stored_bricks() < whole.stored_bricks(),
             "{name}: the band stores {} of {} bricks",
@@ -167,4 +168,27 @@ fn a_narrow_band_is_refused() {
     let narrow = BandGrid::from_dense(dense.dims, &dense.data, 1.0, t / 2.0, reach).unwrap();
     let e = predict_band(&net, cfg.encoder_layers, narrow, &opts, &dev, |_, _| {}).unwrap_err();
     assert!(e.to_string().contains("narrower"), "{e}");
+}
+
+/// Too little memory is a clear error before the work (exit 2, no output), at the reading
+/// (the band itself) or before the network (the cells near the surface).
+#[test]
+fn too_little_memory_is_a_clear_error() {
+    let out = std::env::temp_dir().join(format!("ponq-fine-mem-{}.obj", std::process::id()));
+    for (limit, says) in [
+        ("64K", "values near the surface"),
+        ("8M", "not enough memory"),
+    ] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_ponq-infer"))
+            .arg(repo("examples/example001_sdf_65.npy"))
+            .arg("-o")
+            .arg(&out)
+            .env("PONQ_MEMORY_LIMIT", limit)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(says), "{limit}: {err}");
+        assert!(!out.exists());
+    }
 }

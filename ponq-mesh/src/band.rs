@@ -462,9 +462,17 @@ pub struct BandBuilder {
     slots: Vec<u32>,
     values: Vec<f64>,
     stats: ValueStats,
+    limit: Option<usize>,
 }
 
 impl BandBuilder {
+    /// Stops the build with an error once the stored values would take more than `bytes`
+    /// (a field with a surface everywhere, e.g. noise, stores the whole grid).
+    pub fn with_limit(mut self, bytes: Option<usize>) -> Self {
+        self.limit = bytes;
+        self
+    }
+
     /// A builder for a grid of `dims` nodes. Each value pushed is multiplied by `scale`;
     /// `threshold` is in the scaled units; nodes within `reach` nodes of one below it are
     /// stored too (whole bricks around: `reach` is rounded up to bricks).
@@ -507,6 +515,7 @@ impl BandBuilder {
             slots: vec![FAR_POS; nb],
             values: Vec::new(),
             stats: ValueStats::default(),
+            limit: None,
         })
     }
 
@@ -550,6 +559,19 @@ impl BandBuilder {
         self.planes_done += 1;
         if self.current.planes == BRICK || self.planes_done == d0 {
             self.close_layer();
+        }
+        if let Some(l) = self.limit
+            && self.values.len() * 8 > l
+        {
+            return Err(Error::InvalidInput(format!(
+                "the values near the surface of this grid take more than the {} of memory \
+                 available ({} of {} planes read, {} bricks of 8^3 nodes stored): its surface \
+                 fills much of the grid (a noisy field?), or the machine is short of memory",
+                crate::memory::gb(l as u64),
+                self.planes_done,
+                d0,
+                self.values.len() / B3
+            )));
         }
         Ok(())
     }

@@ -305,7 +305,10 @@ fn run(args: &Args) -> Result<Outcome> {
                 let frame = Frame::of_dims(dims, bounds)
                     .map_err(|e| ponq_mesh::Error::InvalidInput(format!("{e:#}")))?;
                 let (t, reach) = band_parameters(frame.n, net_cfg.encoder_layers, &opts);
-                Ok((frame.scale(), t, reach))
+                // The band may take half of what is free; the rest is for the network and
+                // the meshing (checked again before the network runs).
+                let limit = ponq_mesh::memory::available_bytes().map(|b| b as usize / 2);
+                Ok((frame.scale(), t, reach, limit))
             },
             |done, total| {
                 pb.set_length(total as u64);
@@ -345,7 +348,12 @@ fn run(args: &Args) -> Result<Outcome> {
             "meshing and refining"
         },
     );
+    let band_mb = predicted.normalised.memory_bytes() as f64 / (1 << 20) as f64;
+    let band_share = predicted.normalised.stored_bricks() as f64
+        / predicted.normalised.brick_dims().iter().product::<usize>() as f64;
+    let close_cells = predicted.close_cells;
     let res = finish(&predicted, &opts);
+    drop(predicted);
     sp.finish_and_clear();
     let mut res = res?;
     if let Some(norm) = &normalization
@@ -377,9 +385,10 @@ fn run(args: &Args) -> Result<Outcome> {
             );
         }
         println!(
-            "{}: grid {:?} -> {} cells kept, {} points -> {} V, {} F",
+            "{}: grid {:?} (stored near the surface: {band_mb:.0} MB, {:.1}% of the grid) -> {close_cells} cells near the surface -> {} cells kept, {} points -> {} V, {} F",
             args.output.display(),
             dims,
+            100.0 * band_share,
             res.kept_cells,
             res.ponq.len(),
             res.mesh.vertices.len(),

@@ -110,14 +110,15 @@ pub fn read_npy_grid(path: impl AsRef<Path>) -> Result<Grid3> {
 /// Reads a rank-3 float32 or float64 `.npy` grid (C or Fortran order) into a
 /// [`BandGrid`] plane by plane, never holding more than a few planes of the whole grid.
 /// `band(dims)` gives, from the grid's node counts, the scale applied to every value, the
-/// threshold (in scaled units) and the reach of the band (see [`BandBuilder::new`]); it may
-/// refuse the grid. `progress(done, total)` counts planes.
+/// threshold (in scaled units), the reach of the band (see [`BandBuilder::new`]) and the
+/// most bytes its values may take ([`BandBuilder::with_limit`]); it may refuse the grid.
+/// `progress(done, total)` counts planes.
 ///
 /// Errors are those of [`read_npy_grid`] (naming the file and the node of a non-finite
 /// value), and `band`'s.
 pub fn read_npy_band(
     path: impl AsRef<Path>,
-    band: impl FnOnce([usize; 3]) -> Result<(f64, f64, usize)>,
+    band: impl FnOnce([usize; 3]) -> Result<(f64, f64, usize, Option<usize>)>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<BandGrid> {
     let path = path.as_ref();
@@ -138,7 +139,7 @@ pub fn read_npy_band(
         ));
     }
     let dims = [shape[0], shape[1], shape[2]];
-    let (scale, threshold, reach) = band(dims)?;
+    let (scale, threshold, reach, limit) = band(dims)?;
     // A Fortran-order file holds the planes of the last axis: read it as the reversed grid.
     let stored = if info.fortran {
         [dims[2], dims[1], dims[0]]
@@ -146,7 +147,7 @@ pub fn read_npy_band(
         dims
     };
     let big = is_big_endian(&info.descr);
-    let mut b = BandBuilder::new(stored, scale, threshold, reach)?;
+    let mut b = BandBuilder::new(stored, scale, threshold, reach)?.with_limit(limit);
     let plane = stored[1] * stored[2];
     for p in 0..stored[0] {
         let values = read_values(&mut r, plane, size, big)
@@ -773,7 +774,7 @@ mod tests {
                 &p,
                 |d| {
                     assert_eq!(d, dims);
-                    Ok((2.0, 3.0, 1))
+                    Ok((2.0, 3.0, 1, None))
                 },
                 |done, _| planes = done,
             )
@@ -796,7 +797,7 @@ mod tests {
             }
             // A cut file says where it ends.
             std::fs::write(&p, &b[..b.len() - 100]).unwrap();
-            let e = read_npy_band(&p, |_| Ok((1.0, 1.0, 0)), |_, _| {}).unwrap_err();
+            let e = read_npy_band(&p, |_| Ok((1.0, 1.0, 0, None)), |_, _| {}).unwrap_err();
             assert!(e.to_string().contains("truncated"), "{e}");
             std::fs::remove_dir_all(&dir).ok();
         }

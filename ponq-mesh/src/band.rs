@@ -486,7 +486,7 @@ impl BandBuilder {
                 "an empty grid: {dims:?} nodes"
             )));
         }
-        if !(scale > 0.0 && scale.is_finite()) || !(threshold > 0.0) {
+        if !(scale > 0.0 && scale.is_finite() && threshold > 0.0) {
             return Err(Error::InvalidInput(format!(
                 "band grid: scale {scale} and threshold {threshold} must be positive"
             )));

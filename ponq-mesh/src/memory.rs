@@ -49,7 +49,7 @@ fn parse_size(s: &str) -> Option<u64> {
         _ => (s, 1),
     };
     let v: f64 = num.trim().parse().ok()?;
-    (v >= 0.0 && v.is_finite()).then(|| (v * mult as f64) as u64)
+    (v >= 0.0 && v.is_finite()).then_some((v * mult as f64) as u64)
 }
 
 /// Bytes as GB with one decimal (MB below 1 GB), for messages.

@@ -62,8 +62,7 @@ MC = """
 import sys, time, numpy as np
 from skimage.measure import marching_cubes
 t = time.perf_counter()
-g = np.load(sys.argv[1], mmap_mode="r")
-g = np.asarray(g, dtype=np.float32)
+g = np.load(sys.argv[1]).astype(np.float32, copy=False)
 v, f, _, _ = marching_cubes(g, 0.0)
 print(f"mc {time.perf_counter() - t:.3f} {len(v)} {len(f)}")
 """

@@ -25,6 +25,8 @@
 //! assert_eq!(band.get(0, 0, 0), -2.0 * h);
 //! ```
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 
 /// Nodes per side of a brick.
@@ -83,6 +85,76 @@ impl ValueStats {
         } else if v == self.max {
             self.max_count += 1;
         }
+    }
+
+    /// [`ValueStats::add`] of every value of `v`, in lanes (the reading of a fine grid spends
+    /// most of its time here).
+    fn add_slice(&mut self, v: &[f64]) {
+        if v.is_empty() {
+            return;
+        }
+        const L: usize = 8;
+        let mut mn = [f64::INFINITY; L];
+        let mut mx = [f64::NEG_INFINITY; L];
+        let mut neg = [0u64; L];
+        let chunks = v.chunks_exact(L);
+        let rest = chunks.remainder();
+        for c in chunks {
+            for l in 0..L {
+                mn[l] = if c[l] < mn[l] { c[l] } else { mn[l] };
+                mx[l] = if c[l] > mx[l] { c[l] } else { mx[l] };
+                neg[l] += u64::from(c[l] < 0.0);
+            }
+        }
+        for (l, &x) in rest.iter().enumerate() {
+            mn[l] = if x < mn[l] { x } else { mn[l] };
+            mx[l] = if x > mx[l] { x } else { mx[l] };
+            neg[l] += u64::from(x < 0.0);
+        }
+        let lo = mn
+            .iter()
+            .fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
+        let hi = mx
+            .iter()
+            .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
+        let (mut n_lo, mut n_hi) = (0u64, 0u64);
+        for &x in v {
+            n_lo += u64::from(x == lo);
+            n_hi += u64::from(x == hi);
+        }
+        if lo < self.min {
+            self.min = lo;
+            self.min_count = n_lo;
+        } else if lo == self.min {
+            self.min_count += n_lo;
+        }
+        if hi > self.max {
+            self.max = hi;
+            self.max_count = n_hi;
+        } else if hi == self.max {
+            self.max_count += n_hi;
+        }
+        self.nodes += v.len() as u64;
+        self.negative += neg.iter().sum::<u64>();
+    }
+
+    /// The statistics of both sets of nodes.
+    fn merge(mut self, o: Self) -> Self {
+        if o.min < self.min {
+            self.min = o.min;
+            self.min_count = o.min_count;
+        } else if o.min == self.min {
+            self.min_count += o.min_count;
+        }
+        if o.max > self.max {
+            self.max = o.max;
+            self.max_count = o.max_count;
+        } else if o.max == self.max {
+            self.max_count += o.max_count;
+        }
+        self.nodes += o.nodes;
+        self.negative += o.negative;
+        self
     }
 
     fn add_many(&mut self, v: f64, n: u64) {
@@ -463,6 +535,8 @@ pub struct BandBuilder {
     values: Vec<f64>,
     stats: ValueStats,
     limit: Option<usize>,
+    /// Buffers of decided layers, for the next ones (no fresh pages per layer).
+    spare: Vec<Vec<f64>>,
 }
 
 impl BandBuilder {
@@ -516,6 +590,7 @@ impl BandBuilder {
             values: Vec::new(),
             stats: ValueStats::default(),
             limit: None,
+            spare: Vec::new(),
         })
     }
 
@@ -538,7 +613,9 @@ impl BandBuilder {
             )));
         }
         let i = self.planes_done;
-        if let Some(p) = plane.iter().position(|v| !v.is_finite()) {
+        if !plane.iter().all(|v| v.is_finite())
+            && let Some(p) = plane.iter().position(|v| !v.is_finite())
+        {
             return Err(Error::InvalidInput(format!(
                 "grid value at [{i}, {}, {}] is {}",
                 p / d2,
@@ -547,14 +624,28 @@ impl BandBuilder {
             )));
         }
         if self.current.data.capacity() == 0 {
+            self.current.data = self.spare.pop().unwrap_or_default();
+            self.current.data.clear();
             self.current.data.reserve_exact(BRICK * d1 * d2);
         }
         let s = self.scale;
-        for &v in plane {
-            let v = v * s;
-            self.stats.add(v);
-            self.current.data.push(v);
-        }
+        let start = self.current.data.len();
+        self.current.data.resize(start + plane.len(), 0.0);
+        // Scaled and summarised in parallel blocks of rows (this is most of the reading).
+        let block = (d2 * 64).max(1);
+        let stats = self.current.data[start..]
+            .par_chunks_mut(block)
+            .zip(plane.par_chunks(block))
+            .map(|(dst, src)| {
+                for (d, &v) in dst.iter_mut().zip(src) {
+                    *d = v * s;
+                }
+                let mut st = ValueStats::default();
+                st.add_slice(dst);
+                st
+            })
+            .reduce(ValueStats::default, ValueStats::merge);
+        self.stats = self.stats.merge(stats);
         self.current.planes += 1;
         self.planes_done += 1;
         if self.current.planes == BRICK || self.planes_done == d0 {
@@ -591,23 +682,33 @@ impl BandBuilder {
         let mut neg = vec![false; b1 * b2];
         let mut pos = vec![false; b1 * b2];
         let t = self.threshold;
-        for p in 0..layer.planes {
-            for j in 0..d1 {
-                let row = &layer.data[(p * d1 + j) * d2..(p * d1 + j + 1) * d2];
-                let bj = j / BRICK;
-                for (bk, chunk) in row.chunks(BRICK).enumerate() {
-                    let b = bj * b2 + bk;
-                    for &v in chunk {
-                        if v.abs() < t {
-                            near[b] = true;
+        // Per row of the layer (in parallel), per brick of the row: bit 0 a node below the
+        // threshold, bit 1 a negative node, bit 2 a node >= 0.
+        let flags: Vec<Vec<u8>> = layer.data[..layer.planes * d1 * d2]
+            .par_chunks(d2)
+            .map(|row| {
+                row.chunks(BRICK)
+                    .map(|chunk| {
+                        let (mut amin, mut lo, mut hi) =
+                            (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+                        for &v in chunk {
+                            let a = v.abs();
+                            amin = if a < amin { a } else { amin };
+                            lo = if v < lo { v } else { lo };
+                            hi = if v > hi { v } else { hi };
                         }
-                        if v < 0.0 {
-                            neg[b] = true;
-                        } else {
-                            pos[b] = true;
-                        }
-                    }
-                }
+                        u8::from(amin < t) | (u8::from(lo < 0.0) << 1) | (u8::from(hi >= 0.0) << 2)
+                    })
+                    .collect()
+            })
+            .collect();
+        for (r, f) in flags.iter().enumerate() {
+            let bj = (r % d1) / BRICK;
+            for (bk, &x) in f.iter().enumerate() {
+                let b = bj * b2 + bk;
+                near[b] |= x & 1 != 0;
+                neg[b] |= x & 2 != 0;
+                pos[b] |= x & 4 != 0;
             }
         }
         for b in 0..near.len() {
@@ -626,6 +727,7 @@ impl BandBuilder {
                 break;
             };
             self.decide(l, &layer);
+            self.spare.push(layer.data);
         }
     }
 

@@ -559,9 +559,22 @@ fn read_values<R: Read>(
     size: usize,
     big: bool,
 ) -> std::result::Result<Vec<f64>, String> {
-    const BLOCK: usize = 1 << 16;
     let mut data = Vec::with_capacity(n.min(MAX_PREALLOC));
-    let mut buf = vec![0u8; BLOCK];
+    read_values_into(r, n, size, big, &mut data)?;
+    Ok(data)
+}
+
+/// [`read_values`] appending to `data` (which should be empty: counts in errors are its
+/// length).
+fn read_values_into<R: Read>(
+    r: &mut R,
+    n: usize,
+    size: usize,
+    big: bool,
+    data: &mut Vec<f64>,
+) -> std::result::Result<(), String> {
+    const BLOCK: usize = 1 << 16;
+    let mut buf = [0u8; BLOCK];
     while data.len() < n {
         let want = ((n - data.len()) * size).min(BLOCK);
         let mut got = 0;
@@ -608,7 +621,7 @@ fn read_values<R: Read>(
             ),
         }
     }
-    Ok(data)
+    Ok(())
 }
 
 /// Reorders values stored in Fortran order (first axis fastest) into C order.

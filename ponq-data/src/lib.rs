@@ -27,6 +27,7 @@ pub mod hdf5;
 pub mod normalize;
 pub mod occupancy;
 pub mod prep;
+pub mod records;
 pub mod refine;
 pub mod repair;
 pub mod sampling;

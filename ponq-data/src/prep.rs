@@ -14,6 +14,7 @@ use crate::dataset::ShapeRecord;
 use crate::error::{DataError, Result};
 use crate::normalize::Normalization;
 use crate::occupancy::occupancy_from_samples;
+use crate::records::{Record, RecordLog, Shard, Status};
 use crate::sdf::MeshSdf;
 
 /// Options of [`prepare_mesh`].
@@ -50,6 +51,8 @@ pub struct Prepared {
     pub warning: Option<String>,
     /// What the repair found and did (meshes, with [`PrepOptions::repair`]).
     pub report: Option<crate::repair::DefectReport>,
+    /// Seconds per stage, in order (`read`, `repair`, `sample`, `sdf <res>`, ...).
+    pub times: Vec<(String, f64)>,
 }
 
 /// Exact analytic samples and their normals, in the `[-1,1]` frame.
@@ -69,6 +72,12 @@ pub fn prepare_mesh(
     if opts.resolutions.is_empty() {
         return Err(DataError::Invalid("no grid resolution requested".into()));
     }
+    let mut times = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: String, times: &mut Vec<(String, f64)>| {
+        times.push((name, clock.elapsed().as_secs_f64()));
+        clock = Instant::now();
+    };
     let repaired = if opts.repair && analytic.is_none() {
         Some(crate::repair::repair_with_solid(
             mesh,
@@ -80,6 +89,7 @@ pub fn prepare_mesh(
     let mesh = repaired.as_ref().map_or(mesh, |r| &r.mesh);
     let norm = Normalization::of(mesh)?;
     let m = norm.apply_mesh(mesh);
+    lap("repair".into(), &mut times);
     let (points, normals) = match analytic {
         Some((p, n)) => (p.to_vec(), n.to_vec()),
         None => {
@@ -87,6 +97,7 @@ pub fn prepare_mesh(
             (s.points, s.normals)
         }
     };
+    lap("sample".into(), &mut times);
     if points.is_empty() {
         return Err(DataError::Invalid("the mesh has no area to sample".into()));
     }
@@ -118,11 +129,13 @@ pub fn prepare_mesh(
         record
             .occupancy
             .insert(res, occupancy_from_samples(&points, res)?);
+        lap(format!("sdf {res}"), &mut times);
     }
     Ok(Prepared {
         record,
         warning,
         report,
+        times,
     })
 }
 
@@ -172,6 +185,7 @@ pub fn prepare_synth(
         record,
         warning: None,
         report: None,
+        times: Vec::new(),
     })
 }
 
@@ -181,6 +195,19 @@ pub trait Job: Sync {
     fn id(&self) -> String;
     /// Makes the record.
     fn run(&self, opts: &PrepOptions) -> Result<Prepared>;
+    /// The input file, for the log ([`crate::records`]); empty when generated.
+    fn input(&self) -> PathBuf {
+        PathBuf::new()
+    }
+}
+
+/// Where a batch logs and which part of it runs here.
+#[derive(Default)]
+pub struct BatchRun<'a> {
+    /// Only the shapes of this shard ([`Shard::contains`] on the id).
+    pub shard: Option<Shard>,
+    /// One JSON line per shape (done, already there, or failed with its error).
+    pub log: Option<&'a RecordLog>,
 }
 
 /// What a batch did.
@@ -206,35 +233,80 @@ pub fn run_batch<J: Job>(
     opts: &PrepOptions,
     tick: impl Fn() + Sync,
 ) -> Result<BatchSummary> {
+    run_batch_with(jobs, out_dir, opts, &BatchRun::default(), tick)
+}
+
+/// [`run_batch`] on the jobs of `run.shard` only, each shape's [`Record`] appended to
+/// `run.log` (a failure of the log itself stops the batch).
+pub fn run_batch_with<J: Job>(
+    jobs: &[J],
+    out_dir: &Path,
+    opts: &PrepOptions,
+    run: &BatchRun<'_>,
+    tick: impl Fn() + Sync,
+) -> Result<BatchSummary> {
     std::fs::create_dir_all(out_dir).map_err(|e| ponq_mesh::Error::io(out_dir, e))?;
     let t = Instant::now();
     let summary = Mutex::new(BatchSummary::default());
+    let log_error: Mutex<Option<DataError>> = Mutex::new(None);
     let push = |f: &dyn Fn(&mut BatchSummary)| {
         if let Ok(mut s) = summary.lock() {
             f(&mut s);
         }
     };
-    jobs.par_iter().for_each(|job| {
+    let mine: Vec<&J> = jobs
+        .iter()
+        .filter(|j| run.shard.is_none_or(|s| s.contains(&j.id())))
+        .collect();
+    mine.par_iter().for_each(|job| {
         let id = job.id();
         let path: PathBuf = out_dir.join(format!("{id}.npz"));
-        if path.is_file() {
+        let started = Instant::now();
+        let record = if path.is_file() {
             push(&|s| s.already.push(id.clone()));
+            Record::new(&id, job.input(), Status::Already)
         } else {
-            match job
-                .run(opts)
-                .and_then(|p| p.record.write(&path).map(|()| p.warning))
+            match job.run(opts).and_then(|p| {
+                let w = Instant::now();
+                p.record.write(&path)?;
+                Ok((p, w.elapsed().as_secs_f64()))
+            }) {
+                Ok((p, write)) => {
+                    push(&|s| {
+                        s.done.push(id.clone());
+                        if let Some(w) = &p.warning {
+                            s.warnings.push((id.clone(), w.clone()));
+                        }
+                    });
+                    let mut r = Record::new(&id, job.input(), Status::Done);
+                    r.stages = p.times;
+                    r.stages.push(("write".into(), write));
+                    r.warning = p.warning;
+                    r.report = p.report.map(|x| x.to_json());
+                    r
+                }
+                Err(e) => {
+                    push(&|s| s.skipped.push((id.clone(), e.to_string())));
+                    let mut r = Record::new(&id, job.input(), Status::Error);
+                    r.error = Some(e.to_string());
+                    r
+                }
+            }
+        };
+        if let Some(log) = run.log {
+            let mut record = record;
+            record.seconds = started.elapsed().as_secs_f64();
+            if let Err(e) = log.write(&record)
+                && let Ok(mut slot) = log_error.lock()
             {
-                Ok(w) => push(&|s| {
-                    s.done.push(id.clone());
-                    if let Some(w) = &w {
-                        s.warnings.push((id.clone(), w.clone()));
-                    }
-                }),
-                Err(e) => push(&|s| s.skipped.push((id.clone(), e.to_string()))),
+                *slot = Some(e);
             }
         }
         tick();
     });
+    if let Some(e) = log_error.into_inner().ok().flatten() {
+        return Err(e);
+    }
     let mut s = summary
         .into_inner()
         .map_err(|_| DataError::Invalid("a worker panicked".into()))?;
@@ -257,8 +329,15 @@ impl Job for MeshJob {
             .unwrap_or_else(|| "shape".into())
     }
     fn run(&self, opts: &PrepOptions) -> Result<Prepared> {
+        let t = Instant::now();
         let mesh = ponq_mesh::io::read_mesh(&self.0)?;
-        prepare_mesh(&mesh, None, opts)
+        let read = t.elapsed().as_secs_f64();
+        let mut p = prepare_mesh(&mesh, None, opts)?;
+        p.times.insert(0, ("read".into(), read));
+        Ok(p)
+    }
+    fn input(&self) -> PathBuf {
+        self.0.clone()
     }
 }
 

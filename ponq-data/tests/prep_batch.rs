@@ -55,3 +55,95 @@ fn batch_prepares_skips_and_resumes() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `ponq-prep meshes --shard I/N`: the union of the shards' outputs is the unsharded run's,
+/// byte for byte, with no shape twice; each shard logs one JSON line per shape (the broken
+/// file an error record), and a re-run logs every shape as already there.
+#[test]
+fn shards_cover_the_dataset_once_with_records() {
+    use std::collections::BTreeMap;
+    let dir = std::env::temp_dir().join(format!("ponq-shard-{}", std::process::id()));
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let part = std::fs::read_to_string(examples.join("example001.obj")).unwrap();
+    for i in 0..7 {
+        // Seven small copies (names spread over the shards).
+        std::fs::write(input.join(format!("part_{i}.obj")), &part).unwrap();
+    }
+    std::fs::write(input.join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    let prep = |out: &std::path::Path, shard: Option<&str>| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_ponq-prep"));
+        c.args(["meshes", "-q", "--res", "8", "--samples", "2000", "-o"])
+            .arg(out)
+            .arg(&input);
+        if let Some(s) = shard {
+            c.args(["--shard", s]);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let files = |d: &std::path::Path| -> BTreeMap<String, Vec<u8>> {
+        std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "npz"))
+            .map(|p| {
+                (
+                    p.file_name().unwrap().to_string_lossy().into_owned(),
+                    std::fs::read(&p).unwrap(),
+                )
+            })
+            .collect()
+    };
+    let whole = dir.join("whole");
+    prep(&whole, None);
+    let sharded = dir.join("sharded");
+    let mut seen = 0;
+    let mut lines = Vec::new();
+    for i in 0..3 {
+        prep(&sharded, Some(&format!("{i}/3")));
+        let log =
+            std::fs::read_to_string(sharded.join(format!("log-shard-{i}-of-3.jsonl"))).unwrap();
+        for l in log.lines() {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            lines.push(v);
+        }
+        seen += log.lines().count();
+    }
+    // 8 inputs, each in exactly one shard's log.
+    assert_eq!(seen, 8);
+    let mut names: Vec<String> = lines
+        .iter()
+        .map(|v| v["name"].as_str().unwrap().to_string())
+        .collect();
+    names.sort();
+    names.dedup();
+    assert_eq!(names.len(), 8);
+    let errors: Vec<&serde_json::Value> = lines.iter().filter(|v| v["status"] == "error").collect();
+    assert_eq!(errors.len(), 1);
+    assert_eq!(errors[0]["name"], "broken");
+    assert!(!errors[0]["error"].as_str().unwrap().is_empty());
+    assert!(
+        lines
+            .iter()
+            .filter(|v| v["status"] == "done")
+            .all(|v| v["stages"]["sdf 8"].as_f64().is_some() && v["seconds"].as_f64() > Some(0.0))
+    );
+    assert_eq!(files(&whole), files(&sharded));
+    // Re-running a shard redoes nothing and says so.
+    prep(&sharded, Some("1/3"));
+    let log = std::fs::read_to_string(sharded.join("log-shard-1-of-3.jsonl")).unwrap();
+    let n = log.lines().count();
+    let rerun: Vec<serde_json::Value> = log
+        .lines()
+        .skip(n / 2)
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(
+        rerun
+            .iter()
+            .all(|v| v["status"] == "already" || v["status"] == "error")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

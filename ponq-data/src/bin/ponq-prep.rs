@@ -12,7 +12,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::normalize::Normalization;
-use ponq_data::prep::{Job, MeshJob, PrepOptions, SynthJob, mesh_inputs, run_batch};
+use ponq_data::prep::{BatchRun, Job, MeshJob, PrepOptions, SynthJob, mesh_inputs, run_batch_with};
+use ponq_data::records::RecordLog;
 use ponq_data::repair::{RepairOptions, repair_with_solid};
 use ponq_data::sdf::signed_distance_grid;
 use ponq_data::synth::SynthOptions;
@@ -95,6 +96,18 @@ struct BatchArgs {
     /// Use the meshes as they are, without the repair (see `ponq-prep sdf --help`).
     #[arg(long)]
     no_repair: bool,
+    /// Only shard I of N (e.g. 0/4): the shapes whose name hashes to I modulo N, a split
+    /// that depends on the names only, so N machines or Slurm array tasks
+    /// (`--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT`) cover a dataset exactly once
+    /// into one output folder; each skips what is done and can be re-run after a failure.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<ponq_data::records::Shard>,
+    /// The log: one JSON line per shape (name, input, status done / already / error, the
+    /// error, seconds per stage, peak memory, warning, the repair's report), appended
+    /// [default: OUT/log.jsonl, or OUT/log-shard-I-of-N.jsonl with --shard]. `ponq-eval log`
+    /// summarises logs.
+    #[arg(long, value_name = "LOG.jsonl")]
+    log: Option<PathBuf>,
     /// Print nothing but errors (no progress bar, no summary).
     #[arg(short, long)]
     quiet: bool,
@@ -397,7 +410,24 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
         ProgressStyle::with_template("prep {bar:40} {pos}/{len} shapes [{elapsed} < {eta}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let s = run_batch(jobs, &b.output, &opts, || bar.inc(1))?;
+    std::fs::create_dir_all(&b.output)
+        .with_context(|| format!("creating the output folder {}", b.output.display()))?;
+    let log_path = b.log.clone().unwrap_or_else(|| {
+        b.output.join(match &b.shard {
+            Some(s) => s.log_name(),
+            None => "log.jsonl".into(),
+        })
+    });
+    let log = RecordLog::append(&log_path).context("opening the log")?;
+    if let Some(sh) = &b.shard {
+        let n = jobs.iter().filter(|j| sh.contains(&j.id())).count();
+        bar.set_length(n as u64);
+    }
+    let run = BatchRun {
+        shard: b.shard,
+        log: Some(&log),
+    };
+    let s = run_batch_with(jobs, &b.output, &opts, &run, || bar.inc(1))?;
     bar.finish_and_clear();
     for (id, why) in &s.skipped {
         eprintln!("skipped {id}: {why}");
@@ -407,12 +437,14 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
     }
     if !b.quiet {
         println!(
-            "{}: {} shapes written, {} already there, {} skipped, in {:.1} s",
+            "{}: {} shapes written, {} already there, {} skipped, in {:.1} s{}; log {}",
             b.output.display(),
             s.done.len(),
             s.already.len(),
             s.skipped.len(),
-            s.time.as_secs_f64()
+            s.time.as_secs_f64(),
+            b.shard.map(|x| format!(" (shard {x})")).unwrap_or_default(),
+            log_path.display()
         );
     }
     Ok(())

@@ -42,6 +42,7 @@ pub mod broken;
 pub mod chart;
 pub mod evaluate;
 pub mod inputs;
+pub mod logs;
 pub mod render;
 pub mod report;
 

@@ -41,6 +41,13 @@ enum Cmd {
     /// class: valid outputs, F1 / NC / EF1 beside the clean copies' of the same shapes, the
     /// mean and worst F1 loss, time).
     Broken(BrokenArgs),
+    /// Summarise batch logs (the JSON lines `ponq-prep meshes` and `ponq-infer DIR` write
+    /// beside their outputs; several logs, e.g. one per shard, are merged): shapes by status,
+    /// errors by reason, seconds per shape (percentiles), peak memory, invalid outputs.
+    Log {
+        /// Log files (`.jsonl`), or folders whose `*.jsonl` files are read.
+        logs: Vec<PathBuf>,
+    },
     /// Marching cubes baseline: the zero level set of an SDF grid (.npy, nodes spanning the
     /// [-1,1]^3 box, negative inside, as written by `ponq-prep sdf`).
     Mc {
@@ -95,6 +102,27 @@ fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Run(a) => run_split(a),
         Cmd::Broken(a) => run_broken(a),
+        Cmd::Log { logs } => {
+            let mut files = Vec::new();
+            for p in logs {
+                if p.is_dir() {
+                    let mut found: Vec<PathBuf> = std::fs::read_dir(&p)
+                        .with_context(|| format!("reading {}", p.display()))?
+                        .filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|f| f.extension().is_some_and(|e| e == "jsonl"))
+                        .collect();
+                    found.sort();
+                    files.extend(found);
+                } else {
+                    files.push(p);
+                }
+            }
+            if files.is_empty() {
+                anyhow::bail!("no log given (files .jsonl, or folders holding them)");
+            }
+            print!("{}", ponq_eval::logs::summarise(&files)?);
+            Ok(())
+        }
         Cmd::Mc { sdf, output } => {
             let g = io::npy::read_npy_grid(&sdf).context("reading the SDF grid")?;
             let t = std::time::Instant::now();

@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
+use ponq_data::records::{Record, RecordLog, Status};
 use ponq_infer::mesh_input::{MeshInput, mesh_band};
 use ponq_infer::reconstruct::band_parameters;
 use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict_band, shipped};
@@ -23,18 +24,37 @@ use ponq_model::backend::{BackendKind, device};
 /// The output is closed, oriented, manifold and free of self-intersections (checked; exit
 /// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 empty
 /// surface (the SDF has no sign change; nothing is written).
-#[derive(Parser, Debug)]
+#[derive(Parser, Debug, Clone)]
 #[command(version, about, long_about)]
 struct Args {
     /// Input: an SDF grid (`.npy` array of rank 3, float32 or float64, C or Fortran order;
     /// signed distances in the units of --bounds, negative inside; cells must be cubes), or a
     /// closed triangle mesh (`.obj`, `.ply`, `.off`, `.stl`), which is normalised into
     /// [-1,1]^3 and sampled on a grid of --res cells per side with exact signed distances
-    /// (as `ponq-prep sdf` does); the output is then in the mesh's coordinates.
+    /// (as `ponq-prep sdf` does); the output is then in the mesh's coordinates. A folder
+    /// (searched recursively) or a `.txt` list of such files (one path per line, relative to
+    /// the list) runs them all into the folder -o, one OUT/NAME.<--format> each (see
+    /// --shard, --log).
     input: PathBuf,
-    /// Output mesh (`.obj`, `.ply` or `.off`).
+    /// Output mesh (`.obj`, `.ply` or `.off`); with a folder or list as input, the output
+    /// folder.
     #[arg(short, long)]
     output: PathBuf,
+    /// Folder / list input: the output format of each mesh.
+    #[arg(long, value_name = "EXT", default_value = "obj", value_parser = ["obj", "ply", "off"])]
+    format: String,
+    /// Folder / list input: only shard I of N (e.g. 0/4), a split by the inputs' names
+    /// (their hash modulo N) so that N machines or Slurm array tasks cover the inputs exactly
+    /// once into one folder; outputs already there are skipped, so a run can be repeated
+    /// after a failure.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<ponq_data::records::Shard>,
+    /// Folder / list input: the log, one JSON line per input (name, status done / already /
+    /// error, the error, seconds per stage, peak memory, validity, vertex and face counts,
+    /// the repair's report), appended [default: OUT/log.jsonl, or
+    /// OUT/log-shard-I-of-N.jsonl]; `ponq-eval log` summarises logs.
+    #[arg(long, value_name = "LOG.jsonl")]
+    log: Option<PathBuf>,
     /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
     /// (the network's training resolution), 128 fine [default: 64].
     #[arg(long, value_name = "RES")]
@@ -162,15 +182,23 @@ enum Outcome {
     Empty,
 }
 
+/// What a run measured, for the batch log.
+#[derive(Default)]
+struct Measured {
+    stages: Vec<(String, f64)>,
+    vertices: usize,
+    faces: usize,
+    valid: Option<bool>,
+    report: Option<String>,
+}
+
 fn run(args: &Args) -> Result<Outcome> {
+    run_measured(args, &mut Measured::default())
+}
+
+fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     if let Some(e) = args.kernels.unsupported_here() {
         bail!(e);
-    }
-    if let Some(t) = args.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t.max(1))
-            .build_global()
-            .context("cannot set the thread count")?;
     }
     if let Some(t) = args.open {
         MeshingOptions::check_open_threshold(t).context("--open")?;
@@ -286,6 +314,7 @@ fn run(args: &Args) -> Result<Outcome> {
                 std::fs::write(path, r.to_json() + "\n")
                     .with_context(|| format!("writing the defect report {}", path.display()))?;
             }
+            measured.report = Some(r.to_json());
         }
         if g.open && !args.quiet {
             eprintln!(
@@ -368,6 +397,25 @@ fn run(args: &Args) -> Result<Outcome> {
     }
     let write_time = t.elapsed();
     let report = (!args.no_check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
+    let secs = |d: Duration| d.as_secs_f64();
+    measured.stages = vec![
+        (
+            if normalization.is_some() {
+                "read + sdf"
+            } else {
+                "read"
+            }
+            .to_string(),
+            secs(read_time),
+        ),
+        ("network".into(), secs(res.times.network)),
+        ("to PoNQ".into(), secs(res.times.convert)),
+        ("meshing".into(), secs(res.times.meshing)),
+        ("refinement".into(), secs(res.times.refine)),
+        ("write".into(), secs(write_time)),
+    ];
+    measured.vertices = res.mesh.vertices.len();
+    measured.faces = res.mesh.faces.len();
     if !args.quiet {
         let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
         let s = &res.meshing;
@@ -447,14 +495,197 @@ fn run(args: &Args) -> Result<Outcome> {
             } else {
                 r.is_valid()
             };
+            measured.valid = Some(ok);
             if ok { Outcome::Valid } else { Outcome::Invalid }
         }
     })
 }
 
+/// Whether the input names many inputs: a folder, or a `.txt` / `.lst` list.
+fn is_batch(p: &Path) -> bool {
+    p.is_dir()
+        || p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "txt" | "lst"))
+}
+
+/// The inputs of a folder (meshes and `.npy` grids, recursively, sorted) or a list.
+fn batch_inputs(p: &Path) -> Result<Vec<PathBuf>> {
+    let wanted =
+        |f: &Path| is_mesh_path(f) || f.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    let mut out = Vec::new();
+    if p.is_dir() {
+        let mut stack = vec![p.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).with_context(|| format!("reading {}", d.display()))? {
+                let f = e
+                    .with_context(|| format!("reading {}", d.display()))?
+                    .path();
+                if f.is_dir() {
+                    stack.push(f);
+                } else if wanted(&f) {
+                    out.push(f);
+                }
+            }
+        }
+    } else {
+        let text = std::fs::read_to_string(p)
+            .with_context(|| format!("reading the list {}", p.display()))?;
+        let base = p.parent().unwrap_or(Path::new("."));
+        out.extend(
+            text.lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                .map(|l| base.join(l)),
+        );
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// `ponq-infer DIR -o OUT`: every input into OUT/NAME.EXT, one log record each; returns the
+/// number of failures.
+fn run_batch(args: &Args) -> Result<usize> {
+    if args.json.is_some() || args.save_ponq.is_some() {
+        bail!(
+            "--json and --save-ponq name one file: not with a folder or list input (the log holds each input's report)"
+        );
+    }
+    let inputs = batch_inputs(&args.input)?;
+    if inputs.is_empty() {
+        bail!(
+            "no input (.npy, .obj, .ply, .off, .stl) in {}",
+            args.input.display()
+        );
+    }
+    let name = |p: &Path| {
+        p.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let mut names: Vec<String> = inputs.iter().map(|p| name(p)).collect();
+    names.sort();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        bail!(
+            "two inputs are named {:?}: their outputs would be one file; rename one",
+            w[0]
+        );
+    }
+    let mine: Vec<&PathBuf> = inputs
+        .iter()
+        .filter(|p| args.shard.is_none_or(|s| s.contains(&name(p))))
+        .collect();
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating the output folder {}", args.output.display()))?;
+    let log_path = args.log.clone().unwrap_or_else(|| {
+        args.output.join(match &args.shard {
+            Some(s) => s.log_name(),
+            None => "log.jsonl".into(),
+        })
+    });
+    let log = RecordLog::append(&log_path).context("opening the log")?;
+    let pb = bar(
+        args.quiet,
+        "shapes {bar:30} {pos}/{len} [{elapsed} < {eta}] {msg}",
+    );
+    pb.set_length(mine.len() as u64);
+    let (mut done, mut already, mut failed) = (0, 0, 0);
+    for input in mine {
+        let n = name(input);
+        pb.set_message(n.clone());
+        let output = args.output.join(format!("{n}.{}", args.format));
+        let started = Instant::now();
+        let record = if output.is_file() {
+            already += 1;
+            Record::new(&n, input, Status::Already)
+        } else {
+            let mut one = args.clone();
+            one.input = input.clone();
+            one.output = output.clone();
+            one.quiet = true;
+            if !is_mesh_path(input) {
+                // The mesh-only flags apply to the meshes of a mixed folder.
+                one.res = None;
+                one.normalized = false;
+                one.no_repair = false;
+            }
+            let mut m = Measured::default();
+            let outcome = run_measured(&one, &mut m);
+            let mut r = match &outcome {
+                Ok(Outcome::Valid) => Record::new(&n, input, Status::Done),
+                Ok(Outcome::Invalid) => Record::new(&n, input, Status::Done),
+                Ok(Outcome::Empty) => {
+                    let mut r = Record::new(&n, input, Status::Error);
+                    r.error = Some("the SDF has no sign change: the surface is empty".into());
+                    r
+                }
+                Err(e) => {
+                    let mut r = Record::new(&n, input, Status::Error);
+                    r.error = Some(format!("{e:#}"));
+                    r
+                }
+            };
+            if r.status == Status::Done {
+                done += 1;
+                r.vertices = Some(m.vertices);
+                r.faces = Some(m.faces);
+            } else {
+                failed += 1;
+                // A partial output must not count as done on the next run.
+                let _ = std::fs::remove_file(&output);
+            }
+            r.stages = m.stages;
+            r.valid = m.valid;
+            r.report = m.report;
+            r
+        };
+        let mut record = record;
+        record.seconds = started.elapsed().as_secs_f64();
+        log.write(&record).context("writing the log")?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if !args.quiet {
+        println!(
+            "{}: {done} meshes written, {already} already there, {failed} failed{}; log {}",
+            args.output.display(),
+            args.shard
+                .map(|s| format!(" (shard {s})"))
+                .unwrap_or_default(),
+            log_path.display()
+        );
+    }
+    Ok(failed)
+}
+
 fn main() -> ExitCode {
     ponq_mesh::memory::keep_freed_memory();
     let args = Args::parse();
+    if let Some(t) = args.threads
+        && let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(t.max(1))
+            .build_global()
+    {
+        eprintln!("error: cannot set the thread count: {e}");
+        return ExitCode::from(2);
+    }
+    if is_batch(&args.input) {
+        return match run_batch(&args) {
+            Ok(0) => ExitCode::SUCCESS,
+            Ok(n) => {
+                eprintln!("error: {n} input(s) failed (see the log)");
+                ExitCode::from(2)
+            }
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::from(2)
+            }
+        };
+    }
+    if args.shard.is_some() || args.log.is_some() {
+        eprintln!("error: --shard and --log are for a folder or list input");
+        return ExitCode::from(2);
+    }
     match run(&args) {
         Ok(Outcome::Valid) => ExitCode::SUCCESS,
         Ok(Outcome::Invalid) => {

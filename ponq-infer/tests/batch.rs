@@ -1,0 +1,148 @@
+//! `ponq-infer DIR -o OUT`: every input of a folder into OUT/NAME.obj with one JSON record
+//! each; `--shard I/N` splits the inputs so that the shards' union is the unsharded run, no
+//! input twice; a bad input is an error record, not the end of the batch; a re-run skips
+//! what is done.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn infer(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_ponq-infer"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn outputs(d: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
+        .collect()
+}
+
+fn records(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn folders_shards_and_records() {
+    let dir = std::env::temp_dir().join(format!("ponq-infer-batch-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let input = dir.join("in");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    std::fs::copy(repo("examples/csg_sdf_33.npy"), input.join("grid_a.npy")).unwrap();
+    std::fs::copy(repo("examples/csg.obj"), input.join("sub/part_b.obj")).unwrap();
+    std::fs::copy(repo("examples/example001.obj"), input.join("part_c.obj")).unwrap();
+    std::fs::write(input.join("bad.obj"), "not a mesh\n").unwrap();
+    let os = |p: &Path| p.as_os_str().to_owned();
+    let whole = dir.join("whole");
+    let (code, err) = infer(&[
+        &os(&input),
+        "-o".as_ref(),
+        &os(&whole),
+        "--res".as_ref(),
+        "24".as_ref(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(code, Some(2), "one input is bad: {err}");
+    assert!(err.contains("1 input(s) failed"), "{err}");
+    let log = records(&whole.join("log.jsonl"));
+    assert_eq!(log.len(), 4);
+    let bad: Vec<_> = log.iter().filter(|r| r["status"] == "error").collect();
+    assert_eq!(bad.len(), 1);
+    assert_eq!(bad[0]["name"], "bad");
+    for r in log.iter().filter(|r| r["status"] == "done") {
+        assert_eq!(r["valid"], true, "{r}");
+        assert!(r["faces"].as_u64().unwrap() > 0);
+        assert!(r["stages"]["network"].as_f64().is_some());
+    }
+    // The same mesh as one input at a time.
+    let single = dir.join("single.obj");
+    let (code, err) = infer(&[
+        &os(&input.join("sub/part_b.obj")),
+        "-o".as_ref(),
+        &os(&single),
+        "--res".as_ref(),
+        "24".as_ref(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(
+        std::fs::read(&single).unwrap(),
+        std::fs::read(whole.join("part_b.obj")).unwrap()
+    );
+    // Three shards into one folder: the same outputs, each input in one shard's log.
+    let sharded = dir.join("sharded");
+    let mut names = Vec::new();
+    for i in 0..3 {
+        let shard = format!("{i}/3");
+        infer(&[
+            &os(&input),
+            "-o".as_ref(),
+            &os(&sharded),
+            "--res".as_ref(),
+            "24".as_ref(),
+            "--shard".as_ref(),
+            shard.as_ref(),
+            "-q".as_ref(),
+        ]);
+        for r in records(&sharded.join(format!("log-shard-{i}-of-3.jsonl"))) {
+            names.push(r["name"].as_str().unwrap().to_string());
+        }
+    }
+    names.sort();
+    assert_eq!(names, ["bad", "grid_a", "part_b", "part_c"]);
+    assert_eq!(outputs(&whole), outputs(&sharded));
+    // A re-run redoes nothing that is done.
+    infer(&[
+        &os(&input),
+        "-o".as_ref(),
+        &os(&whole),
+        "--res".as_ref(),
+        "24".as_ref(),
+        "-q".as_ref(),
+    ]);
+    let log = records(&whole.join("log.jsonl"));
+    let rerun = &log[4..];
+    assert_eq!(rerun.iter().filter(|r| r["status"] == "already").count(), 3);
+    // Flags of one input are refused with a folder.
+    let (code, err) = infer(&[
+        &os(&input),
+        "-o".as_ref(),
+        &os(&whole),
+        "--json".as_ref(),
+        "r.json".as_ref(),
+    ]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--json"), "{err}");
+    let (code, err) = infer(&[
+        &os(&repo("examples/csg_sdf_33.npy")),
+        "-o".as_ref(),
+        &os(&dir.join("x.obj")),
+        "--shard".as_ref(),
+        "0/2".as_ref(),
+    ]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("folder or list"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

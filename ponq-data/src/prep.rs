@@ -223,6 +223,8 @@ pub struct BatchSummary {
     pub warnings: Vec<(String, String)>,
     /// Wall time.
     pub time: Duration,
+    /// Every shape's record, in the order they finished (as logged).
+    pub records: Vec<Record>,
 }
 
 /// Runs `jobs` in parallel into `out_dir/<id>.npz`, skipping finished shapes (so a killed run
@@ -293,15 +295,15 @@ pub fn run_batch_with<J: Job>(
                 }
             }
         };
-        if let Some(log) = run.log {
-            let mut record = record;
-            record.seconds = started.elapsed().as_secs_f64();
-            if let Err(e) = log.write(&record)
-                && let Ok(mut slot) = log_error.lock()
-            {
-                *slot = Some(e);
-            }
+        let mut record = record;
+        record.seconds = started.elapsed().as_secs_f64();
+        if let Some(log) = run.log
+            && let Err(e) = log.write(&record)
+            && let Ok(mut slot) = log_error.lock()
+        {
+            *slot = Some(e);
         }
+        push(&|s| s.records.push(record.clone()));
         tick();
     });
     if let Some(e) = log_error.into_inner().ok().flatten() {

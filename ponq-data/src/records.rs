@@ -245,7 +245,15 @@ impl RecordLog {
     /// # Errors
     /// Writing fails.
     pub fn write(&self, r: &Record) -> Result<()> {
-        let line = r.to_json() + "\n";
+        self.append_line(&r.to_json())
+    }
+
+    /// Appends one line (a record already in JSON, e.g. read from another log).
+    ///
+    /// # Errors
+    /// Writing fails.
+    pub fn append_line(&self, json: &str) -> Result<()> {
+        let line = format!("{}\n", json.trim_end());
         let mut f = self
             .file
             .lock()

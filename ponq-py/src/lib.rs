@@ -9,11 +9,13 @@
 //! arrays in and out, checked as the programs check files), `options` (shared keyword
 //! arguments), then one module per family of functions: `inference` (`infer`), `field`
 //! (`infer_field`: a signed distance function evaluated near its surface only), `meshing`
-//! (`mesh`, `marching_cubes`), `data` (`sdf`, `sample`, `fit`), `evaluation` (`metrics`,
+//! (`mesh`, `marching_cubes`), `data` (`sdf`, `sample`, `fit`), `datasets` (`prepare_meshes`: dataset records as
+//! `ponq-prep meshes` writes them, shards, logs), `evaluation` (`metrics`,
 //! `check`).
 
 mod arrays;
 mod data;
+mod datasets;
 mod errors;
 mod evaluation;
 mod field;
@@ -54,6 +56,7 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(field::infer_field, m)?)?;
     m.add_function(wrap_pyfunction!(meshing::mesh, m)?)?;
     m.add_function(wrap_pyfunction!(data::sdf, m)?)?;
+    m.add_function(wrap_pyfunction!(datasets::prepare_meshes, m)?)?;
     m.add_function(wrap_pyfunction!(data::sample, m)?)?;
     m.add_function(wrap_pyfunction!(data::fit, m)?)?;
     m.add_function(wrap_pyfunction!(evaluation::metrics, m)?)?;
@@ -69,6 +72,7 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
             "infer_field",
             "mesh",
             "sdf",
+            "prepare_meshes",
             "sample",
             "fit",
             "metrics",

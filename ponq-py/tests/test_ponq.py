@@ -516,3 +516,73 @@ def test_infer_field_takes_a_torch_module():
         )
     assert ponq.check(v, faces)["valid"]
     assert stats["points"] < stats["dense_points"]
+
+
+def _dataset(tmp_path, count=20):
+    """`count` meshes (the shared evaluation meshes where they are, else copies of the
+    examples) and one broken file, in a folder."""
+    src = ROOT.parent / "shared" / "data" / "meshes"
+    files = sorted(p for p in src.rglob("*.obj")) if src.is_dir() else []
+    files = files[:count]
+    d = tmp_path / "meshes"
+    d.mkdir()
+    if len(files) < count:
+        files = [EXAMPLES / "csg.obj", EXAMPLES / "example001.obj"]
+        for i in range(count):
+            (d / f"part_{i:02d}.obj").write_bytes(files[i % 2].read_bytes())
+    else:
+        for f in files:
+            (d / f.name).write_bytes(f.read_bytes())
+    (d / "broken.obj").write_text("v 0 0 0\nnot a face\n")
+    return d
+
+
+def _npz_files(d):
+    return {p.name: p.read_bytes() for p in sorted(Path(d).glob("*.npz"))}
+
+
+def test_prepare_meshes_matches_ponq_prep(tmp_path):
+    d = _dataset(tmp_path, count=4)
+    meshes = sorted(str(p) for p in d.glob("*.obj"))
+    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "3000", "-q"])
+    recs = ponq.prepare_meshes(meshes, str(tmp_path / "py"), res=[16], samples=3000)
+    assert _npz_files(tmp_path / "cli") == _npz_files(tmp_path / "py")
+    assert sorted(r["status"] for r in recs) == ["done"] * 4 + ["error"]
+    again = ponq.prepare_meshes(meshes, str(tmp_path / "py"), res=[16], samples=3000, log=False)
+    assert sorted(r["status"] for r in again) == ["already"] * 4 + ["error"]
+    # Shards: disjoint and covering.
+    names = [
+        {r["name"] for r in ponq.prepare_meshes(meshes, str(tmp_path / "s"), res=[16], samples=3000, shard=f"{i}/3")}
+        for i in range(3)
+    ]
+    assert sum(len(n) for n in names) == 5 and set().union(*names) == {Path(m).stem for m in meshes}
+    with pytest.raises(ValueError, match="shard"):
+        ponq.prepare_meshes(meshes, str(tmp_path / "x"), shard="3/3")
+
+
+def test_ray_prepare_matches_ponq_prep(tmp_path):
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install ./ponq-py[ray])")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("ray_prepare", ROOT / "ponq-py" / "examples" / "ray_prepare.py")
+    ray_prepare = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ray_prepare)
+    d = _dataset(tmp_path, count=20)
+    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "2000", "-q"])
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        meshes = ray_prepare.mesh_files(d)
+        out = tmp_path / "ray"
+        recs = ray_prepare.prepare(meshes, out, shards=4, res=[16], samples=2000)
+        assert _npz_files(tmp_path / "cli") == _npz_files(out)
+        assert len(_npz_files(out)) == 20
+        errors = [r for r in recs if r["status"] == "error"]
+        assert len(errors) == 1 and errors[0]["name"] == "broken" and errors[0]["error"]
+        assert sorted(r["name"] for r in recs) == sorted(Path(m).stem for m in meshes)
+        # The logs beside the outputs hold the same records; a second run skips everything.
+        logged = [json.loads(l) for f in sorted(out.glob("log-shard-*.jsonl")) for l in f.read_text().splitlines()]
+        assert len(logged) == 21
+        again = ray_prepare.prepare(meshes, out, shards=4, res=[16], samples=2000)
+        assert sorted(r["status"] for r in again) == ["already"] * 20 + ["error"]
+    finally:
+        ray.shutdown()

@@ -10,6 +10,8 @@
 //! deflate-compressed (`np.savez` and `np.savez_compressed` both work). Other arrays in the
 //! archive are ignored. [`write_ponq`] writes `float64` C-order arrays, uncompressed, like
 //! `np.savez`, so a write/read round trip of a PoNQ with symmetric quadric matrices is exact.
+//! Entries carry a fixed date (1980-01-01), so the same arrays give the same bytes (records of
+//! a dataset prepared on several machines compare and hash equal).
 //!
 //! ```python
 //! import numpy as np
@@ -168,6 +170,7 @@ fn write_array<W: Write + Seek>(
     let bytes = shape.iter().fold(8u64, |a, &d| a.saturating_mul(d));
     let options = zip::write::FileOptions::default()
         .compression_method(zip::CompressionMethod::Stored)
+        .last_modified_time(zip::DateTime::default())
         .large_file(bytes > u32::MAX as u64 / 2);
     let mut w = npz
         .array::<f64>(name, options)?
@@ -264,6 +267,7 @@ pub fn write_arrays(path: impl AsRef<Path>, arrays: &[NamedArray]) -> Result<()>
             let bytes = shape.iter().fold(4u64, |acc, &d| acc.saturating_mul(d));
             let options = zip::write::FileOptions::default()
                 .compression_method(zip::CompressionMethod::Stored)
+                .last_modified_time(zip::DateTime::default())
                 .large_file(bytes > u32::MAX as u64 / 2);
             let mut w = npz
                 .array::<f32>(&a.name, options)

@@ -1,0 +1,118 @@
+//! `ponq.prepare_meshes`: dataset records of mesh files, as `ponq-prep meshes` writes them
+//! (the same files, byte for byte), with the same shards and log: what a Ray task, a Slurm
+//! array task or a notebook calls on its part of a dataset.
+
+use std::path::PathBuf;
+
+use ponq_data::prep::{BatchRun, MeshJob, PrepOptions, run_batch_with};
+use ponq_data::records::{RecordLog, Shard};
+use pyo3::prelude::*;
+use pyo3::types::PyList;
+
+use crate::errors::{Failure, run, value_err};
+
+/// Prepares mesh files as dataset records into ``out``: ``out/NAME.npz`` per mesh with
+/// ``pointcloud``, ``normals``, ``<res>_sdf`` and ``<res>_occupancy`` in the [-1,1] frame,
+/// exactly as ``ponq-prep meshes`` writes them (the same bytes). Records already in ``out``
+/// are skipped (a re-run resumes); a bad mesh is an error record, not an exception.
+///
+/// Args:
+///     meshes: mesh file paths (.obj, .ply, .off, .stl); the output name is the file stem.
+///     out: output folder (created).
+///     res: grid resolutions (cells per side).
+///     samples: surface samples per shape.
+///     sample_seed: sampling seed.
+///     repair: repair broken meshes first (``ponq-prep sdf --help``).
+///     shard: ``(i, n)`` or ``"i/n"``: only the meshes whose name hashes to ``i`` modulo
+///         ``n`` (the split of ``ponq-prep meshes --shard``).
+///     log: the JSON-lines log to append one record per mesh to; default
+///         ``out/log.jsonl`` (``out/log-shard-I-of-N.jsonl`` with ``shard``); ``False``: none.
+///         Give each concurrent worker its own file.
+///     threads: worker threads (a pool of that size for this call); default all cores.
+///
+/// Returns:
+///     A list of dicts, one per mesh of the shard: ``name``, ``input``, ``status``
+///     (``"done"``, ``"already"`` or ``"error"``), ``error``, ``stages`` (seconds per
+///     stage), ``seconds``, ``peak_rss_mb``, ``warning``, ``report`` (the repair's).
+///
+/// Raises:
+///     ValueError: bad options. OSError-like failures of the output folder or the log
+///     raise ``RuntimeError``.
+#[pyfunction]
+#[pyo3(
+    signature = (meshes, out, *, res=vec![32, 64], samples=1_000_000, sample_seed=0, repair=true, shard=None, log=None, threads=None),
+    text_signature = "(meshes, out, *, res=[32, 64], samples=1000000, sample_seed=0, repair=True, shard=None, log=None, threads=None)"
+)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn prepare_meshes<'py>(
+    py: Python<'py>,
+    meshes: Vec<PathBuf>,
+    out: PathBuf,
+    res: Vec<usize>,
+    samples: usize,
+    sample_seed: u64,
+    repair: bool,
+    shard: Option<Bound<'py, PyAny>>,
+    log: Option<Bound<'py, PyAny>>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyList>> {
+    if res.is_empty() || res.iter().any(|r| !(2..=1024).contains(r)) {
+        return Err(value_err(format!(
+            "res values must be in 2..=1024, got {res:?}"
+        )));
+    }
+    if samples == 0 {
+        return Err(value_err("samples must be positive"));
+    }
+    let shard: Option<Shard> = match shard {
+        None => None,
+        Some(s) if s.is_none() => None,
+        Some(s) => Some(if let Ok(text) = s.extract::<String>() {
+            text.parse().map_err(value_err)?
+        } else {
+            let (i, n): (u64, u64) = s
+                .extract()
+                .map_err(|_| value_err("shard takes (i, n) or \"i/n\""))?;
+            Shard::new(i, n)
+                .ok_or_else(|| value_err(format!("shard {i}/{n}: i must be below n")))?
+        }),
+    };
+    let log_path: Option<PathBuf> = match log {
+        None => Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name()))),
+        Some(l) if l.is_none() => {
+            Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name())))
+        }
+        Some(l) => match l.extract::<bool>() {
+            Ok(false) => None,
+            Ok(true) => Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name()))),
+            Err(_) => Some(l.extract::<PathBuf>()?),
+        },
+    };
+    let opts = PrepOptions {
+        resolutions: res,
+        samples,
+        seed: sample_seed,
+        repair,
+    };
+    let lines: Vec<String> = run(py, threads, move || {
+        std::fs::create_dir_all(&out)
+            .map_err(|e| Failure::Runtime(format!("creating {}: {e}", out.display())))?;
+        let log = match &log_path {
+            Some(p) => Some(RecordLog::append(p)?),
+            None => None,
+        };
+        let jobs: Vec<MeshJob> = meshes.into_iter().map(MeshJob).collect();
+        let batch = BatchRun {
+            shard,
+            log: log.as_ref(),
+        };
+        let s = run_batch_with(&jobs, &out, &opts, &batch, || {})?;
+        Ok(s.records.iter().map(|r| r.to_json()).collect())
+    })?;
+    let json = py.import("json")?;
+    let list = PyList::empty(py);
+    for l in lines {
+        list.append(json.call_method1("loads", (l,))?)?;
+    }
+    Ok(list)
+}

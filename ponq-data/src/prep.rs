@@ -270,7 +270,17 @@ pub fn run_batch_with<J: Job>(
         } else {
             match job.run(opts).and_then(|p| {
                 let w = Instant::now();
-                p.record.write(&path)?;
+                // Written under a temporary name and renamed when whole: a killed run leaves
+                // no partial record that the next run would take as done.
+                let partial = out_dir.join(format!(".{id}.partial-{}.npz", std::process::id()));
+                let written = p.record.write(&partial).and_then(|()| {
+                    std::fs::rename(&partial, &path)
+                        .map_err(|e| ponq_mesh::Error::io(&path, e).into())
+                });
+                if written.is_err() {
+                    let _ = std::fs::remove_file(&partial);
+                }
+                written?;
                 Ok((p, w.elapsed().as_secs_f64()))
             }) {
                 Ok((p, write)) => {

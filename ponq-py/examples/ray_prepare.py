@@ -75,7 +75,8 @@ def prepare(
     """Runs every shard as a Ray task (Ray must be initialised); returns all records."""
     os.makedirs(out, exist_ok=True)
     if shards is None:
-        shards = max(1, 4 * int(ray.cluster_resources().get("CPU", 1)))
+        # Many small tasks balance shapes of unequal cost; no more tasks than shapes.
+        shards = max(1, min(len(meshes), 8 * int(ray.cluster_resources().get("CPU", 1))))
     pending = [
         prepare_shard.options(num_cpus=threads).remote(
             list(meshes), str(out), i, shards, list(res), samples, sample_seed, repair, threads
@@ -100,7 +101,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=1_000_000)
     ap.add_argument("--sample-seed", type=int, default=0)
     ap.add_argument("--no-repair", action="store_true")
-    ap.add_argument("--shards", type=int, help="Ray tasks [default: 4 per CPU of the cluster]")
+    ap.add_argument("--shards", type=int, help="Ray tasks [default: 8 per CPU of the cluster, at most one per mesh]")
     ap.add_argument("--threads", type=int, default=1, help="cores per task")
     ap.add_argument("--address", help="Ray cluster address ('auto' for the cluster this node is in); default: a local instance")
     ap.add_argument("--num-cpus", type=int, help="CPUs of the local instance")

@@ -601,7 +601,14 @@ fn run_batch(args: &Args) -> Result<usize> {
         } else {
             let mut one = args.clone();
             one.input = input.clone();
-            one.output = output.clone();
+            // Written under a temporary name, renamed when whole and checked (a killed run
+            // leaves nothing the next run would take as done).
+            let partial = args.output.join(format!(
+                ".{n}.partial-{}.{}",
+                std::process::id(),
+                args.format
+            ));
+            one.output = partial.clone();
             one.quiet = true;
             if !is_mesh_path(input) {
                 // The mesh-only flags apply to the meshes of a mixed folder.
@@ -625,14 +632,23 @@ fn run_batch(args: &Args) -> Result<usize> {
                     r
                 }
             };
+            if r.status == Status::Done
+                && let Err(e) = std::fs::rename(&partial, &output)
+            {
+                r.status = Status::Error;
+                r.error = Some(format!(
+                    "renaming {} to {}: {e}",
+                    partial.display(),
+                    output.display()
+                ));
+            }
             if r.status == Status::Done {
                 done += 1;
                 r.vertices = Some(m.vertices);
                 r.faces = Some(m.faces);
             } else {
                 failed += 1;
-                // A partial output must not count as done on the next run.
-                let _ = std::fs::remove_file(&output);
+                let _ = std::fs::remove_file(&partial);
             }
             r.stages = m.stages;
             r.valid = m.valid;

@@ -20,8 +20,8 @@ use crate::options::{domain, warn_invalid};
 /// never built. Blocks of nodes are tested at their centres, coarse to fine (as MISE and
 /// SDFStudio do): a block whose value is farther from zero than the field can change over
 /// it holds no surface and keeps its sign; the bricks of 8^3 nodes near the surface are
-/// evaluated at every node. At 1024 cells per side that is about 2% of the dense grid's
-/// billion points. For a field that changes no faster than ``lipschitz`` (1 for a true
+/// evaluated at every node. At 1024 cells per side that is 3-4% of the dense grid's billion
+/// points. For a field that changes no faster than ``lipschitz`` (1 for a true
 /// distance) the mesh is the dense grid's, bit for bit.
 ///
 /// Args:

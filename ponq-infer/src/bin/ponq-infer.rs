@@ -26,8 +26,8 @@ use ponq_model::backend::{BackendKind, device};
 /// surface (the SDF has no sign change; nothing is written).
 ///
 /// Only the part of the grid near the surface is kept (read plane by plane; for a mesh,
-/// distances are computed there only), so time and memory follow the surface: 513^3 grids
-/// take seconds and about 1.3 GB, 1025^3 about 5 GB. A run that would not fit in the
+/// distances are computed there only), so time and memory follow the surface: a 513^3 grid
+/// of a part takes 15-20 s and about 1.3 GB, 1025^3 about 90 s and 5 GB (two cores). A run that would not fit in the
 /// available memory (or in $PONQ_MEMORY_LIMIT, e.g. 8G) stops before the work with what it
 /// needs.
 #[derive(Parser, Debug, Clone)]

@@ -11,7 +11,8 @@ use anyhow::{Context, Result};
 pub struct LogSummary {
     /// Lines read (records).
     pub records: usize,
-    /// Shapes by their last status (a resumed run logs a shape again: the last line wins).
+    /// Shapes by their last status (a resumed run logs a shape again: the last line wins,
+    /// but a shape logged as done and later as already there counts as done, with its time).
     pub by_status: BTreeMap<String, usize>,
     /// Failed shapes by reason (the error's text up to its first colon-free part).
     pub by_reason: BTreeMap<String, usize>,
@@ -43,7 +44,12 @@ pub fn summarise(logs: &[PathBuf]) -> Result<LogSummary> {
                 Ok(v) if v["name"].is_string() => {
                     s.records += 1;
                     let key = v["name"].as_str().unwrap_or_default().to_string();
-                    last.insert(key, v);
+                    // A re-run logs a done shape as already there: its done record stands.
+                    let keep_done = v["status"] == "already"
+                        && last.get(&key).is_some_and(|o| o["status"] == "done");
+                    if !keep_done {
+                        last.insert(key, v);
+                    }
                 }
                 _ => s.bad_lines.push((path.clone(), i + 1)),
             }
@@ -170,11 +176,13 @@ mod tests {
                 "\n",
                 r#"{"name":"x","status":"done","seconds":4.0,"peak_rss_mb":300,"valid":true}"#,
                 "\n",
+                r#"{"name":"x","status":"already","seconds":0.0}"#,
+                "\n",
             ),
         )
         .unwrap();
         let s = summarise(&[a, b]).unwrap();
-        assert_eq!(s.records, 4);
+        assert_eq!(s.records, 5);
         assert_eq!(s.by_status["done"], 2);
         assert_eq!(s.by_status["error"], 1);
         assert_eq!(s.by_reason["bad face"], 1);

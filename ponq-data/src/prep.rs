@@ -376,17 +376,22 @@ impl Job for SynthJob {
 /// Mesh files of a folder (obj/ply/off/stl, sorted) or listed in a text file (one path per
 /// line, relative to the list's folder).
 pub fn mesh_inputs(dir_or_list: &Path) -> Result<Vec<PathBuf>> {
-    let is_mesh = |p: &Path| {
-        p.extension()
-            .and_then(|e| e.to_str())
-            .map(|e| {
-                matches!(
-                    e.to_ascii_lowercase().as_str(),
-                    "obj" | "ply" | "off" | "stl"
-                )
-            })
-            .unwrap_or(false)
-    };
+    input_files(dir_or_list, |p| {
+        p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+            matches!(
+                e.to_ascii_lowercase().as_str(),
+                "obj" | "ply" | "off" | "stl"
+            )
+        })
+    })
+}
+
+/// The files of a folder (searched recursively) that `accept` takes, or the paths listed in a
+/// text file (one per line, relative to the list's folder; `#` starts a comment line), sorted.
+///
+/// # Errors
+/// A folder or list that cannot be read.
+pub fn input_files(dir_or_list: &Path, accept: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>> {
     let io = |e| ponq_mesh::Error::io(dir_or_list, e);
     let mut out = Vec::new();
     if dir_or_list.is_dir() {
@@ -396,7 +401,7 @@ pub fn mesh_inputs(dir_or_list: &Path) -> Result<Vec<PathBuf>> {
                 let p = e.map_err(io)?.path();
                 if p.is_dir() {
                     stack.push(p);
-                } else if is_mesh(&p) {
+                } else if accept(&p) {
                     out.push(p);
                 }
             }

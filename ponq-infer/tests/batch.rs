@@ -125,6 +125,22 @@ fn folders_shards_and_records() {
     let log = records(&whole.join("log.jsonl"));
     let rerun = &log[4..];
     assert_eq!(rerun.iter().filter(|r| r["status"] == "already").count(), 3);
+    // A list file: paths relative to it, comments skipped.
+    let list = input.join("list.txt");
+    std::fs::write(&list, "# two of them\ngrid_a.npy\nsub/part_b.obj\n").unwrap();
+    let listed = dir.join("listed");
+    let (code, err) = infer(&[
+        &os(&list),
+        "-o".as_ref(),
+        &os(&listed),
+        "--res".as_ref(),
+        "24".as_ref(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let got = outputs(&listed);
+    assert_eq!(got.keys().collect::<Vec<_>>(), ["grid_a.obj", "part_b.obj"]);
+    assert_eq!(got["part_b.obj"], outputs(&whole)["part_b.obj"]);
     // Flags of one input are refused with a folder.
     let (code, err) = infer(&[
         &os(&input),

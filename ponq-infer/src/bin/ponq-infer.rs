@@ -517,36 +517,10 @@ fn is_batch(p: &Path) -> bool {
 
 /// The inputs of a folder (meshes and `.npy` grids, recursively, sorted) or a list.
 fn batch_inputs(p: &Path) -> Result<Vec<PathBuf>> {
-    let wanted =
-        |f: &Path| is_mesh_path(f) || f.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-    let mut out = Vec::new();
-    if p.is_dir() {
-        let mut stack = vec![p.to_path_buf()];
-        while let Some(d) = stack.pop() {
-            for e in std::fs::read_dir(&d).with_context(|| format!("reading {}", d.display()))? {
-                let f = e
-                    .with_context(|| format!("reading {}", d.display()))?
-                    .path();
-                if f.is_dir() {
-                    stack.push(f);
-                } else if wanted(&f) {
-                    out.push(f);
-                }
-            }
-        }
-    } else {
-        let text = std::fs::read_to_string(p)
-            .with_context(|| format!("reading the list {}", p.display()))?;
-        let base = p.parent().unwrap_or(Path::new("."));
-        out.extend(
-            text.lines()
-                .map(str::trim)
-                .filter(|l| !l.is_empty() && !l.starts_with('#'))
-                .map(|l| base.join(l)),
-        );
-    }
-    out.sort();
-    Ok(out)
+    ponq_data::prep::input_files(p, |f| {
+        is_mesh_path(f) || f.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy"))
+    })
+    .with_context(|| format!("listing the inputs of {}", p.display()))
 }
 
 /// `ponq-infer DIR -o OUT`: every input into OUT/NAME.EXT, one log record each; returns the

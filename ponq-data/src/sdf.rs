@@ -1513,9 +1513,41 @@ fn build_tree(mesh: &TriMesh) -> (Vec<Node>, Vec<u32>) {
             }
         })
         .collect();
-    let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
-    build_rec(&mut nodes, &mut items, 0, 0);
+    let nodes = build_par(&mut items, 0, 0);
     (nodes, items.iter().map(|it| it.id).collect())
+}
+
+/// Items below which a subtree is built on one thread.
+const PAR_ITEMS: usize = 1 << 14;
+
+/// The subtree of `items` in pre-order (node, left subtree, right subtree; `right` indices
+/// relative to the subtree's first node), the two halves of large nodes built in parallel:
+/// the same tree and layout as [`build_rec`] alone (the same queries, bit for bit).
+fn build_par(items: &mut [Item], start: usize, depth: usize) -> Vec<Node> {
+    if items.len() <= PAR_ITEMS {
+        let mut nodes = Vec::with_capacity(2 * items.len() / LEAF_SIZE + 2);
+        build_rec(&mut nodes, items, start, depth);
+        return nodes;
+    }
+    let (mut node, mid) = split_node(items, start, depth);
+    let Some(mid) = mid else {
+        return vec![node];
+    };
+    let (l, r) = items.split_at_mut(mid);
+    let (left, right) = rayon::join(
+        || build_par(l, start, depth + 1),
+        || build_par(r, start + mid, depth + 1),
+    );
+    let shift = |n: &Node, by: u32| Node {
+        right: if n.is_leaf() { LEAF } else { n.right + by },
+        ..*n
+    };
+    node.right = 1 + left.len() as u32;
+    let mut out = Vec::with_capacity(1 + left.len() + right.len());
+    out.push(node);
+    out.extend(left.iter().map(|n| shift(n, 1)));
+    out.extend(right.iter().map(|n| shift(n, node.right)));
+    out
 }
 
 fn build_rec(nodes: &mut Vec<Node>, items: &mut [Item], start: usize, depth: usize) {

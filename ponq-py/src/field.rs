@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use numpy::{PyArray2, PyArrayMethods};
 use ponq_infer::field::field_band;
-use ponq_infer::{InferOptions, RefineMode, finish, predict_band};
+use ponq_infer::{finish, predict_band};
 use ponq_mesh::validity;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
@@ -13,7 +13,7 @@ use pyo3::types::{PyDict, PyTuple};
 use crate::arrays::{mesh_out, tuple};
 use crate::errors::{Failure, run, value_err, warn};
 use crate::inference::network;
-use crate::options::{domain, warn_invalid};
+use crate::options::{infer_options, warn_invalid};
 
 /// Reconstructs a mesh from a signed distance *function* with the PoNQ network, evaluating
 /// it only where the surface can be: the grid of ``res`` cells per side over ``bounds`` is
@@ -78,32 +78,7 @@ pub(crate) fn infer_field<'py>(
             "f must be a callable: points (N, 3) -> distances (N,)",
         ));
     }
-    let merge_smooth = merge_smooth.unwrap_or(0.0);
-    if !(0.0..=180.0).contains(&merge_smooth) {
-        return Err(value_err(format!(
-            "merge_smooth takes an angle in [0, 180] degrees, got {merge_smooth}"
-        )));
-    }
-    let refine: RefineMode = refine
-        .parse()
-        .map_err(|e| value_err(format!("invalid value '{refine}' for refine: {e}")))?;
-    if (lite || coarsen > 0) && refine == RefineMode::On {
-        return Err(value_err(
-            "refine='on' works on the full PoNQ: not with lite or coarsen",
-        ));
-    }
-    let opts = InferOptions {
-        bounds: domain(bounds)?,
-        lite,
-        coarsen,
-        merge_smooth: (merge_smooth > 0.0).then_some(merge_smooth),
-        refine: if lite || coarsen > 0 {
-            RefineMode::Off
-        } else {
-            refine
-        },
-        ..Default::default()
-    };
+    let opts = infer_options(bounds, lite, coarsen, merge_smooth, None, refine)?;
     let dev = ponq_model::backend::cpu();
     let (net, cfg) = network(model.as_deref(), &dev)
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("{e:#}")))?;

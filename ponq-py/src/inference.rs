@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
 use burn::prelude::Device;
-use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict};
+use ponq_infer::{Frame, finish, predict};
 use ponq_mesh::validity;
 use ponq_model::{PonqNet, PonqNetConfig};
 use pyo3::prelude::*;
@@ -13,7 +13,7 @@ use pyo3::types::PyTuple;
 
 use crate::arrays::{grid3, mesh_out, ponq_out, tuple};
 use crate::errors::{Failure, bad, run, value_err, warn};
-use crate::options::{check_open, domain, open_arg, warn_invalid};
+use crate::options::{check_open, infer_options, open_arg, warn_invalid};
 
 /// The network of `model` (a `.bpk` file) or the shipped one, loaded once and kept.
 pub(crate) fn network(
@@ -109,35 +109,8 @@ pub(crate) fn infer<'py>(
     }
     let open = open_arg(open.as_ref())?;
     check_open(open)?;
-    let merge_smooth = merge_smooth.unwrap_or(0.0);
-    if !(0.0..=180.0).contains(&merge_smooth) {
-        return Err(value_err(format!(
-            "merge_smooth takes an angle in [0, 180] degrees, got {merge_smooth}"
-        )));
-    }
-    let refine: RefineMode = refine
-        .parse()
-        .map_err(|e| value_err(format!("invalid value '{refine}' for refine: {e}")))?;
-    let bounds = domain(bounds)?;
+    let opts = infer_options(bounds, lite, coarsen, merge_smooth, open, refine)?;
     let grid = grid3(sdf)?;
-    if (lite || coarsen > 0) && refine == RefineMode::On {
-        return Err(value_err(
-            "refine='on' works on the full PoNQ: not with lite or coarsen",
-        ));
-    }
-    let opts = InferOptions {
-        bounds,
-        lite,
-        coarsen,
-        merge_smooth: (merge_smooth > 0.0).then_some(merge_smooth),
-        open,
-        refine: if lite || coarsen > 0 {
-            RefineMode::Off
-        } else {
-            refine
-        },
-        ..Default::default()
-    };
     let (res, report) = run(py, threads, move || {
         // The checks of `predict`, first, so that their errors are input errors.
         Frame::of(&grid, opts.bounds).map_err(|e| Failure::Value(format!("{e:#}")))?;

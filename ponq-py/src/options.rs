@@ -6,6 +6,8 @@ use ponq_mesh::validity::ValidityReport;
 use pyo3::prelude::*;
 use pyo3::types::PyBool;
 
+use ponq_infer::{InferOptions, RefineMode};
+
 use crate::errors::{value_err, warn};
 
 /// The open-surface threshold that `open=True` stands for (the programs' `--open` without a
@@ -18,6 +20,47 @@ pub(crate) fn domain(bounds: Option<Vec<f64>>) -> PyResult<([f64; 3], [f64; 3])>
         None => Ok(([-1.0; 3], [1.0; 3])),
         Some(b) => MeshingOptions::domain_from(&b).map_err(|e| value_err(format!("bounds: {e}"))),
     }
+}
+
+/// The inference options of the keyword arguments `ponq.infer` and `ponq.infer_field` share,
+/// checked as `ponq-infer` checks its flags (`merge_smooth` `None` or 0 keeps every point;
+/// `lite` / `coarsen` turn the refinement off, and refuse `refine='on'`).
+pub(crate) fn infer_options(
+    bounds: Option<Vec<f64>>,
+    lite: bool,
+    coarsen: u32,
+    merge_smooth: Option<f64>,
+    open: Option<f64>,
+    refine: &str,
+) -> PyResult<InferOptions> {
+    let merge_smooth = merge_smooth.unwrap_or(0.0);
+    if !(0.0..=180.0).contains(&merge_smooth) {
+        return Err(value_err(format!(
+            "merge_smooth takes an angle in [0, 180] degrees, got {merge_smooth}"
+        )));
+    }
+    let refine: RefineMode = refine
+        .parse()
+        .map_err(|e| value_err(format!("invalid value '{refine}' for refine: {e}")))?;
+    let bounds = domain(bounds)?;
+    if (lite || coarsen > 0) && refine == RefineMode::On {
+        return Err(value_err(
+            "refine='on' works on the full PoNQ: not with lite or coarsen",
+        ));
+    }
+    Ok(InferOptions {
+        bounds,
+        lite,
+        coarsen,
+        merge_smooth: (merge_smooth > 0.0).then_some(merge_smooth),
+        open,
+        refine: if lite || coarsen > 0 {
+            RefineMode::Off
+        } else {
+            refine
+        },
+        ..Default::default()
+    })
 }
 
 /// `open=`: `None` / `False` (closed), `True` (the default threshold 0.35) or a threshold.

@@ -4,23 +4,10 @@
 //! what is done.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
-}
-
-fn infer(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_ponq-infer"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        o.status.code(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
+mod common;
+use common::{repo, run as infer};
 
 fn outputs(d: &Path) -> BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(d)

@@ -4,16 +4,13 @@
 //! whole grid stored (what inference did before), for a grid file read plane by plane and for
 //! a mesh whose distances are computed near its surface only.
 
-use std::path::{Path, PathBuf};
-
 use ponq_infer::mesh_input::{MeshInput, mesh_band, mesh_grid};
 use ponq_infer::{InferOptions, band_parameters, finish, predict, predict_band, shipped};
 use ponq_mesh::band::BandGrid;
 use ponq_mesh::{TriMesh, io, validity};
 
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
-}
+mod common;
+use common::repo;
 
 fn same_mesh(a: &TriMesh, b: &TriMesh) -> bool {
     a.faces == b.faces

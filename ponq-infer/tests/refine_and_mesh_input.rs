@@ -3,8 +3,7 @@
 //! runs on exact and truncated grids, stays off on scaled, smoothed and noisy ones, and no
 //! such grid gives a worse mesh than without it.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use ponq_data::normalize::Normalization;
 use ponq_data::sdf::MeshSdf;
@@ -12,32 +11,8 @@ use ponq_mesh::io::npy::{Grid3, write_npy_grid_f32};
 use ponq_mesh::metrics::{MetricOptions, compare};
 use ponq_mesh::{TriMesh, io, validity};
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ponq-infer-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
-}
-
-/// Runs `ponq-infer` and returns (exit code, stdout + stderr).
-fn run(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_ponq-infer"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        o.status.code(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        ),
-    )
-}
+mod common;
+use common::{repo, run, tmp};
 
 fn os(p: &Path) -> &std::ffi::OsStr {
     p.as_os_str()

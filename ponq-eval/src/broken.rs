@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ponq_data::broken::{Defect, break_mesh, union_surface};
 use ponq_data::normalize::Normalization;
-use ponq_infer::mesh_input::{MeshInput, mesh_grid};
-use ponq_infer::{InferOptions, finish, predict};
+use ponq_infer::mesh_input::{MeshInput, mesh_band};
+use ponq_infer::{InferOptions, finish, predict_band};
 use ponq_mesh::metrics::{MetricOptions, compare};
 use ponq_mesh::{TriMesh, io, validity};
 use ponq_model::PonqNet;
@@ -95,9 +95,16 @@ fn reconstruct(
     encoder_layers: usize,
     device: &Device,
 ) -> Result<(TriMesh, bool)> {
-    let g = mesh_grid(input, res, MeshInput::default(), |_| {})?;
     let opts = InferOptions::default();
-    let p = predict(net, encoder_layers, &g.grid, &opts, device, |_, _| {})?;
+    let g = mesh_band(
+        input,
+        res,
+        MeshInput::default(),
+        encoder_layers,
+        &opts,
+        |_, _| {},
+    )?;
+    let p = predict_band(net, encoder_layers, g.grid, &opts, device, |_, _| {})?;
     let r = finish(&p, &opts)?;
     Ok((
         g.normalization.invert_mesh(&r.mesh),

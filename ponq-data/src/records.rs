@@ -83,6 +83,12 @@ impl std::fmt::Display for Shard {
     }
 }
 
+/// The default log of a batch writing into `out`: `out/log.jsonl`, or
+/// `out/log-shard-I-of-N.jsonl` for a shard (so that concurrent shards never share a file).
+pub fn default_log(out: &Path, shard: Option<Shard>) -> PathBuf {
+    out.join(shard.map_or_else(|| "log.jsonl".to_string(), |s| s.log_name()))
+}
+
 /// 64-bit FNV-1a (stable across platforms and versions, unlike the standard library's hasher).
 fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use ponq_data::prep::{BatchRun, MeshJob, PrepOptions, run_batch_with};
-use ponq_data::records::{RecordLog, Shard};
+use ponq_data::records::{RecordLog, Shard, default_log};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 
@@ -78,15 +78,12 @@ pub(crate) fn prepare_meshes<'py>(
         }),
     };
     let log_path: Option<PathBuf> = match log {
-        None => Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name()))),
-        Some(l) if l.is_none() => {
-            Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name())))
-        }
-        Some(l) => match l.extract::<bool>() {
+        Some(l) if !l.is_none() => match l.extract::<bool>() {
             Ok(false) => None,
-            Ok(true) => Some(out.join(shard.map_or("log.jsonl".to_string(), |s| s.log_name()))),
+            Ok(true) => Some(default_log(&out, shard)),
             Err(_) => Some(l.extract::<PathBuf>()?),
         },
+        _ => Some(default_log(&out, shard)),
     };
     let opts = PrepOptions {
         resolutions: res,

@@ -412,12 +412,10 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
     );
     std::fs::create_dir_all(&b.output)
         .with_context(|| format!("creating the output folder {}", b.output.display()))?;
-    let log_path = b.log.clone().unwrap_or_else(|| {
-        b.output.join(match &b.shard {
-            Some(s) => s.log_name(),
-            None => "log.jsonl".into(),
-        })
-    });
+    let log_path = b
+        .log
+        .clone()
+        .unwrap_or_else(|| ponq_data::records::default_log(&b.output, b.shard));
     let log = RecordLog::append(&log_path).context("opening the log")?;
     if let Some(sh) = &b.shard {
         let n = jobs.iter().filter(|j| sh.contains(&j.id())).count();

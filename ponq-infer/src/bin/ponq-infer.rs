@@ -557,12 +557,10 @@ fn run_batch(args: &Args) -> Result<usize> {
         .collect();
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating the output folder {}", args.output.display()))?;
-    let log_path = args.log.clone().unwrap_or_else(|| {
-        args.output.join(match &args.shard {
-            Some(s) => s.log_name(),
-            None => "log.jsonl".into(),
-        })
-    });
+    let log_path = args
+        .log
+        .clone()
+        .unwrap_or_else(|| ponq_data::records::default_log(&args.output, args.shard));
     let log = RecordLog::append(&log_path).context("opening the log")?;
     let pb = bar(
         args.quiet,

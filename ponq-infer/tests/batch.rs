@@ -147,5 +147,14 @@ fn folders_shards_and_records() {
     ]);
     assert_eq!(code, Some(2));
     assert!(err.contains("folder or list"), "{err}");
+    // Two inputs of one name would write one output: refused before any work.
+    let twins = dir.join("twins");
+    std::fs::create_dir_all(twins.join("sub")).unwrap();
+    std::fs::copy(repo("examples/csg.obj"), twins.join("a.obj")).unwrap();
+    std::fs::copy(repo("examples/csg_sdf_33.npy"), twins.join("sub/a.npy")).unwrap();
+    let (code, err) = infer(&[&os(&twins), "-o".as_ref(), &os(&dir.join("twins-out"))]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("two inputs are named \"a\""), "{err}");
+    assert!(!dir.join("twins-out").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -165,3 +165,15 @@ def metrics(
 ) -> Dict[str, Any]: ...
 def check(vertices: npt.ArrayLike, faces: npt.ArrayLike) -> Dict[str, Any]: ...
 def marching_cubes(sdf: npt.ArrayLike, *, bounds: Bounds = None) -> Mesh: ...
+def prepare_meshes(
+    meshes: Sequence[Union[str, os.PathLike[str]]],
+    out: Union[str, os.PathLike[str]],
+    *,
+    res: Sequence[int] = (32, 64),
+    samples: int = 1000000,
+    sample_seed: int = 0,
+    repair: bool = True,
+    shard: Union[None, str, Tuple[int, int]] = None,
+    log: Union[None, bool, str, os.PathLike[str]] = None,
+    threads: Optional[int] = None,
+) -> list[Dict[str, Any]]: ...

@@ -189,9 +189,10 @@ pub fn prepare_synth(
     })
 }
 
-/// One unit of work of a batch: an id (the output file stem) and how to make its shape.
+/// One unit of work of a batch: an id (the output's name, [`crate::names`]) and how to make
+/// its shape.
 pub trait Job: Sync {
-    /// Output file stem.
+    /// The output's name: `OUT/<id>.npz` (it may hold `/`: sub-folders of the output).
     fn id(&self) -> String;
     /// Makes the record.
     fn run(&self, opts: &PrepOptions) -> Result<Prepared>;
@@ -221,10 +222,19 @@ pub struct BatchSummary {
     pub skipped: Vec<(String, String)>,
     /// Warnings (written shapes with a remark).
     pub warnings: Vec<(String, String)>,
+    /// Temporary files of crashed runs removed.
+    pub stale_removed: usize,
     /// Wall time.
     pub time: Duration,
     /// Every shape's record, in the order they finished (as logged).
     pub records: Vec<Record>,
+}
+
+impl BatchSummary {
+    /// Whether every shape of the run is done or was already there.
+    pub fn all_done(&self) -> bool {
+        self.skipped.is_empty()
+    }
 }
 
 /// Runs `jobs` in parallel into `out_dir/<id>.npz`, skipping finished shapes (so a killed run
@@ -240,6 +250,13 @@ pub fn run_batch<J: Job>(
 
 /// [`run_batch`] on the jobs of `run.shard` only, each shape's [`Record`] appended to
 /// `run.log` (a failure of the log itself stops the batch).
+///
+/// Outputs are written whole or not at all ([`crate::outputs`]); an output already there
+/// counts as done only when it is whole (a cut one is redone, with a warning); temporary
+/// files of crashed runs are removed as their shapes come up.
+///
+/// # Errors
+/// Two jobs with one id (before any work), the output folder or the log cannot be written.
 pub fn run_batch_with<J: Job>(
     jobs: &[J],
     out_dir: &Path,
@@ -247,8 +264,17 @@ pub fn run_batch_with<J: Job>(
     run: &BatchRun<'_>,
     tick: impl Fn() + Sync,
 ) -> Result<BatchSummary> {
+    let mut ids: Vec<String> = jobs.iter().map(Job::id).collect();
+    ids.sort_unstable();
+    if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+        return Err(DataError::Invalid(format!(
+            "two shapes of the batch are named {:?}: their outputs would be one file",
+            w[0]
+        )));
+    }
     std::fs::create_dir_all(out_dir).map_err(|e| ponq_mesh::Error::io(out_dir, e))?;
     let t = Instant::now();
+    let stale = crate::outputs::StalePartials::find(out_dir);
     let summary = Mutex::new(BatchSummary::default());
     let log_error: Mutex<Option<DataError>> = Mutex::new(None);
     let push = |f: &dyn Fn(&mut BatchSummary)| {
@@ -256,34 +282,51 @@ pub fn run_batch_with<J: Job>(
             f(&mut s);
         }
     };
+    let shards = run.shard.map_or(1, |s| s.count());
     let mine: Vec<&J> = jobs
         .iter()
         .filter(|j| run.shard.is_none_or(|s| s.contains(&j.id())))
         .collect();
     mine.par_iter().for_each(|job| {
         let id = job.id();
-        let path: PathBuf = out_dir.join(format!("{id}.npz"));
+        let path = crate::names::output_path(out_dir, &id, "npz");
         let started = Instant::now();
-        let record = if path.is_file() {
+        let removed = stale.remove_for(&path);
+        if removed > 0 {
+            push(&|s| s.stale_removed += removed);
+        }
+        let cut = path.exists() && !crate::outputs::is_whole(&path, false);
+        let record = if !cut && path.is_file() {
             push(&|s| s.already.push(id.clone()));
             Record::new(&id, job.input(), Status::Already)
         } else {
             match job.run(opts).and_then(|p| {
                 let w = Instant::now();
-                // Written under a temporary name and renamed when whole: a killed run leaves
-                // no partial record that the next run would take as done.
-                let partial = out_dir.join(format!(".{id}.partial-{}.npz", std::process::id()));
-                let written = p.record.write(&partial).and_then(|()| {
-                    std::fs::rename(&partial, &path)
-                        .map_err(|e| ponq_mesh::Error::io(&path, e).into())
-                });
+                if let Some(dir) = path.parent() {
+                    std::fs::create_dir_all(dir).map_err(|e| ponq_mesh::Error::io(dir, e))?;
+                }
+                // Written under a temporary name and committed when whole: a killed run (or a
+                // crashed machine) leaves no partial record that the next run would take as
+                // done.
+                let partial = crate::outputs::partial_path(&path);
+                let written = p
+                    .record
+                    .write(&partial)
+                    .and_then(|()| crate::outputs::commit(&partial, &path));
                 if written.is_err() {
                     let _ = std::fs::remove_file(&partial);
                 }
                 written?;
                 Ok((p, w.elapsed().as_secs_f64()))
             }) {
-                Ok((p, write)) => {
+                Ok((mut p, write)) => {
+                    if cut {
+                        let w = "its output was cut (a run that crashed): redone".to_string();
+                        p.warning = Some(match p.warning {
+                            Some(x) => format!("{w}; {x}"),
+                            None => w,
+                        });
+                    }
                     push(&|s| {
                         s.done.push(id.clone());
                         if let Some(w) = &p.warning {
@@ -306,6 +349,7 @@ pub fn run_batch_with<J: Job>(
             }
         };
         let mut record = record;
+        record.shards = shards;
         record.seconds = started.elapsed().as_secs_f64();
         if let Some(log) = run.log
             && let Err(e) = log.write(&record)
@@ -330,26 +374,41 @@ pub fn run_batch_with<J: Job>(
     Ok(s)
 }
 
-/// A mesh file to prepare.
-pub struct MeshJob(pub PathBuf);
+/// A mesh file to prepare, and its output's name ([`mesh_jobs`] names a whole batch).
+pub struct MeshJob {
+    /// The mesh file.
+    pub path: PathBuf,
+    /// The output's name ([`crate::names::output_names`] of the batch's files).
+    pub name: String,
+}
+
+/// The jobs of a batch of mesh files, named by [`crate::names::output_names`].
+///
+/// # Errors
+/// Two files that would share an output (they differ by their extension only).
+pub fn mesh_jobs(files: Vec<PathBuf>) -> Result<Vec<MeshJob>> {
+    let names = crate::names::output_names(&files)?;
+    Ok(files
+        .into_iter()
+        .zip(names)
+        .map(|(path, name)| MeshJob { path, name })
+        .collect())
+}
 
 impl Job for MeshJob {
     fn id(&self) -> String {
-        self.0
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "shape".into())
+        self.name.clone()
     }
     fn run(&self, opts: &PrepOptions) -> Result<Prepared> {
         let t = Instant::now();
-        let mesh = ponq_mesh::io::read_mesh(&self.0)?;
+        let mesh = ponq_mesh::io::read_mesh(&self.path)?;
         let read = t.elapsed().as_secs_f64();
         let mut p = prepare_mesh(&mesh, None, opts)?;
         p.times.insert(0, ("read".into(), read));
         Ok(p)
     }
     fn input(&self) -> PathBuf {
-        self.0.clone()
+        self.path.clone()
     }
 }
 

@@ -124,8 +124,14 @@ impl Status {
 /// One shape's line of a [`RecordLog`].
 #[derive(Debug, Clone)]
 pub struct Record {
-    /// The output's stem.
+    /// The output's name ([`crate::names`]: the input's stem, or its path below the dataset's
+    /// folder where stems repeat).
     pub name: String,
+    /// When the record was made: UTC, `YYYY-MM-DDTHH:MM:SS.ffffffZ` (fixed width, so that
+    /// text order is time order).
+    pub time: String,
+    /// The shard count of the run that wrote it (1: not sharded).
+    pub shards: u64,
     /// The input file.
     pub input: PathBuf,
     /// What happened.
@@ -156,6 +162,8 @@ impl Record {
     pub fn new(name: impl Into<String>, input: impl Into<PathBuf>, status: Status) -> Self {
         Self {
             name: name.into(),
+            time: utc_now(),
+            shards: 1,
             input: input.into(),
             status,
             error: None,
@@ -174,6 +182,8 @@ impl Record {
     pub fn to_json(&self) -> String {
         let mut m = serde_json::Map::new();
         m.insert("name".into(), self.name.clone().into());
+        m.insert("time".into(), self.time.clone().into());
+        m.insert("shards".into(), self.shards.into());
         m.insert(
             "input".into(),
             self.input.to_string_lossy().into_owned().into(),
@@ -200,6 +210,21 @@ impl Record {
         m.insert("report".into(), report);
         serde_json::Value::Object(m).to_string()
     }
+}
+
+/// The time now, UTC, as [`Record::time`] writes it.
+pub fn utc_now() -> String {
+    let t = time::OffsetDateTime::now_utc();
+    format!(
+        "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:06}Z",
+        t.year(),
+        u8::from(t.month()),
+        t.day(),
+        t.hour(),
+        t.minute(),
+        t.second(),
+        t.microsecond()
+    )
 }
 
 fn round(x: f64) -> f64 {
@@ -315,5 +340,10 @@ mod tests {
         assert_eq!(v["error"], "line 1\nline 2");
         assert_eq!(v["stages"]["sdf"], 0.1235);
         assert_eq!(v["report"]["found"], 3);
+        assert_eq!(v["shards"], 1);
+        let t = v["time"].as_str().unwrap();
+        assert_eq!(t.len(), "2026-12-07T20:01:02.123456Z".len(), "{t}");
+        assert!(t.ends_with('Z') && t.as_bytes()[10] == b'T');
+        assert!(t >= "2026-01-01" && utc_now().as_str() >= t);
     }
 }

@@ -946,6 +946,17 @@ impl MeshSdf {
             }
         }
         let list: Vec<usize> = (0..stored.len()).filter(|&b| stored[b]).collect();
+        // Priced before the distances: per node, f32 distances (twice with another solid)
+        // and the band's f64 value.
+        let b3_bytes = (BRICK * BRICK * BRICK) as u64;
+        ponq_mesh::memory::check(
+            list.len() as u64 * b3_bytes * (8 + if same { 4 } else { 8 }),
+            &format!(
+                "the distances near the surface ({} bricks of 8^3 nodes at {n1}^3)",
+                list.len()
+            ),
+            "take a coarser resolution",
+        )?;
         let slot_of = |b: usize| list.binary_search(&b).ok();
         let brick_lo = |b: usize| [b / (nb * nb), (b / nb) % nb, b % nb].map(|v| v * BRICK);
         // Unsigned distances at the stored nodes (padding: +inf).

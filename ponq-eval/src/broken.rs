@@ -64,6 +64,23 @@ impl CopyRow {
         )
     }
 
+    /// The row of a copy that could not be evaluated at all, with its error.
+    pub fn failed(shape: &str, group: &str, copy: &str, error: String) -> Self {
+        Self {
+            shape: shape.to_string(),
+            group: group.to_string(),
+            copy: copy.to_string(),
+            valid: false,
+            cd_x1e5: f64::INFINITY,
+            f1: 0.0,
+            nc: 0.0,
+            ef1: 0.0,
+            seconds: 0.0,
+            repaired: false,
+            error,
+        }
+    }
+
     /// Parses [`CopyRow::csv`].
     pub fn parse(line: &str) -> Option<Self> {
         let f: Vec<&str> = line.splitn(11, ',').collect();
@@ -113,7 +130,9 @@ fn reconstruct(
 }
 
 /// Every copy of one shape: the clean mesh and one broken copy per class of `defects`, each
-/// reconstructed at `res` cells per side and compared with the clean mesh.
+/// reconstructed at `res` cells per side and compared with the clean mesh. A copy that fails
+/// is a row with its error; only a shape that cannot be read at all is an `Err` (the caller
+/// writes its rows, [`CopyRow::failed`]).
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_copies(
     shape: &str,
@@ -173,9 +192,16 @@ pub fn evaluate_copies(
                 row.valid = !out.faces.is_empty() && validity::check(&out).is_valid();
                 let out_n = norm.apply_mesh(&out);
                 if d == Some(Defect::Overlap) {
-                    let union = union_surface(&truth, 0.25 * 2.0 / res as f64)?;
-                    let m = compare(&out_n, &union, &opts);
-                    (row.cd_x1e5, row.f1, row.nc, row.ef1) = (m.cd_x1e5, m.f1, m.nc, f64::NAN);
+                    // The reference of an overlap is the union's surface; a failure to build
+                    // it is this copy's error row, not the end of the evaluation.
+                    match union_surface(&truth, 0.25 * 2.0 / res as f64) {
+                        Ok(union) => {
+                            let m = compare(&out_n, &union, &opts);
+                            (row.cd_x1e5, row.f1, row.nc, row.ef1) =
+                                (m.cd_x1e5, m.f1, m.nc, f64::NAN);
+                        }
+                        Err(e) => row.error = format!("the union's surface: {e:#}"),
+                    }
                 } else {
                     let m = compare(&out_n, &truth, &opts);
                     (row.cd_x1e5, row.f1, row.nc, row.ef1) = (m.cd_x1e5, m.f1, m.nc, m.ef1);

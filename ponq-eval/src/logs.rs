@@ -11,8 +11,9 @@ use anyhow::{Context, Result};
 pub struct LogSummary {
     /// Lines read (records).
     pub records: usize,
-    /// Shapes by their last status (a resumed run logs a shape again: the last line wins,
-    /// but a shape logged as done and later as already there counts as done, with its time).
+    /// Shapes by their newest status (a resumed run logs a shape again: the newest record
+    /// wins, but a shape logged as done and later as already there counts as done, with its
+    /// time).
     pub by_status: BTreeMap<String, usize>,
     /// Failed shapes by reason (the error's text up to its first colon-free part).
     pub by_reason: BTreeMap<String, usize>,
@@ -24,15 +25,27 @@ pub struct LogSummary {
     pub invalid: usize,
     /// Lines that are not records (reported, not fatal).
     pub bad_lines: Vec<(PathBuf, usize)>,
+    /// The shard counts of the runs that wrote the records (several: the dataset was run with
+    /// other splits; the newest record of each shape still decides).
+    pub shard_counts: std::collections::BTreeSet<u64>,
 }
 
-/// Reads every log (JSON lines) and summarises the last record of each shape.
+/// Reads every log (JSON lines) and summarises the newest record of each shape: by its `time`
+/// (UTC; records of older versions without one count as older than any with one, in the
+/// order read), so that logs of runs with other shard counts, read in any order, never let
+/// an old error stand over a newer success. A shape whose newest record says "already" and
+/// that has a "done" record counts as done, with that record's time.
 ///
 /// # Errors
 /// A log that cannot be read.
 pub fn summarise(logs: &[PathBuf]) -> Result<LogSummary> {
     let mut s = LogSummary::default();
-    let mut last: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    // Per shape: its newest record and its newest "done" record, each with its order key
+    // (time, then reading order).
+    type Keyed = ((String, usize), serde_json::Value);
+    let mut newest: BTreeMap<String, Keyed> = BTreeMap::new();
+    let mut newest_done: BTreeMap<String, Keyed> = BTreeMap::new();
+    let mut order = 0usize;
     for path in logs {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading the log {}", path.display()))?;
@@ -43,17 +56,39 @@ pub fn summarise(logs: &[PathBuf]) -> Result<LogSummary> {
             match serde_json::from_str::<serde_json::Value>(line) {
                 Ok(v) if v["name"].is_string() => {
                     s.records += 1;
-                    let key = v["name"].as_str().unwrap_or_default().to_string();
-                    // A re-run logs a done shape as already there: its done record stands.
-                    let keep_done = v["status"] == "already"
-                        && last.get(&key).is_some_and(|o| o["status"] == "done");
-                    if !keep_done {
-                        last.insert(key, v);
+                    order += 1;
+                    if let Some(n) = v["shards"].as_u64() {
+                        s.shard_counts.insert(n);
+                    }
+                    let name = v["name"].as_str().unwrap_or_default().to_string();
+                    let key = (v["time"].as_str().unwrap_or("").to_string(), order);
+                    let slot = if v["status"] == "done" {
+                        Some(&mut newest_done)
+                    } else {
+                        None
+                    };
+                    if let Some(m) = slot
+                        && m.get(&name).is_none_or(|(k, _)| *k < key)
+                    {
+                        m.insert(name.clone(), (key.clone(), v.clone()));
+                    }
+                    if newest.get(&name).is_none_or(|(k, _)| *k < key) {
+                        newest.insert(name, (key, v));
                     }
                 }
                 _ => s.bad_lines.push((path.clone(), i + 1)),
             }
         }
+    }
+    let mut last: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    for (name, (_, v)) in newest {
+        // A re-run logs a done shape as already there: its done record stands.
+        let v = if v["status"] == "already" {
+            newest_done.remove(&name).map_or(v, |(_, d)| d)
+        } else {
+            v
+        };
+        last.insert(name, v);
     }
     for v in last.values() {
         let status = v["status"].as_str().unwrap_or("unknown").to_string();
@@ -144,6 +179,14 @@ impl std::fmt::Display for LogSummary {
         if !self.bad_lines.is_empty() {
             writeln!(f, "lines that are not records: {}", self.bad_lines.len())?;
         }
+        if self.shard_counts.len() > 1 {
+            let counts: Vec<String> = self.shard_counts.iter().map(u64::to_string).collect();
+            writeln!(
+                f,
+                "runs with {} shards: each shape's newest record counts",
+                counts.join(", ")
+            )?;
+        }
         Ok(())
     }
 }
@@ -191,6 +234,50 @@ mod tests {
         assert_eq!(s.bad_lines.len(), 1);
         assert!(s.to_string().contains("p50"));
         assert_eq!(reason("at 12.5 mm: 3 faces"), "N faces");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Two logs of runs with different shard counts: whatever order they are read in, the
+    /// newest record of a shape decides (an old error never overrides a newer done).
+    #[test]
+    fn newest_record_wins_across_shard_counts() {
+        let dir = std::env::temp_dir().join(format!("ponq-logs-shards-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // The first run: 2 shards; "a" failed, "b" done.
+        let old = dir.join("log-shard-1-of-2.jsonl");
+        std::fs::write(
+            &old,
+            concat!(
+                r#"{"name":"a","time":"2026-12-01T10:00:00.000000Z","shards":2,"status":"error","error":"x: out of memory"}"#,
+                "\n",
+                r#"{"name":"b","time":"2026-12-01T10:00:01.000000Z","shards":2,"status":"done","seconds":3.0}"#,
+                "\n",
+            ),
+        )
+        .unwrap();
+        // The re-run: 3 shards; "a" done now, "b" already there.
+        let new = dir.join("log-shard-0-of-3.jsonl");
+        std::fs::write(
+            &new,
+            concat!(
+                r#"{"name":"a","time":"2026-12-02T09:00:00.000000Z","shards":3,"status":"done","seconds":5.0}"#,
+                "\n",
+                r#"{"name":"b","time":"2026-12-02T09:00:01.000000Z","shards":3,"status":"already","seconds":0.0}"#,
+                "\n",
+            ),
+        )
+        .unwrap();
+        for logs in [
+            vec![old.clone(), new.clone()],
+            vec![new.clone(), old.clone()],
+        ] {
+            let s = summarise(&logs).unwrap();
+            assert_eq!(s.by_status.get("done"), Some(&2), "{s}");
+            assert_eq!(s.by_status.get("error"), None, "{s}");
+            assert_eq!(s.seconds, vec![3.0, 5.0]);
+            assert_eq!(s.shard_counts.len(), 2);
+            assert!(s.to_string().contains("2, 3 shards"), "{s}");
+        }
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -194,6 +194,16 @@ pub fn field_band(
     let list: Vec<usize> = (0..stored.len()).filter(|&b| stored[b]).collect();
     stats.stored_bricks = list.len();
     let b3 = BRICK * BRICK * BRICK;
+    // Priced before the field runs on them: the bricks' values, held twice while the band
+    // is assembled.
+    ponq_mesh::memory::check(
+        (list.len() * b3 * 16) as u64,
+        &format!(
+            "the field's values near its surface ({} bricks of 8^3 nodes at {n1}^3)",
+            list.len()
+        ),
+        "take a coarser resolution",
+    )?;
     let mut bricks = Vec::with_capacity(list.len());
     // Bricks in groups, so that a batch holds many bricks' nodes.
     let per_group = (batch / b3).clamp(1, 4096);

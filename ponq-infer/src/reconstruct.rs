@@ -245,23 +245,27 @@ pub fn band_parameters(n: usize, encoder_layers: usize, opts: &InferOptions) -> 
 /// 484k cells of 4 points, a band of 71 MB: 570 bytes a point), with a margin.
 const BYTES_PER_CLOSE_POINT: u64 = 700;
 
-/// Refuses a run whose cells near the surface would take more memory than is available
-/// (`ponq_mesh::memory::available_bytes`), before any work.
-fn check_memory(band: &BandGrid, close: usize, points_per_cell: usize) -> Result<()> {
-    let need =
-        band.memory_bytes() as u64 + close as u64 * points_per_cell as u64 * BYTES_PER_CLOSE_POINT;
-    if let Some(avail) = ponq_mesh::memory::available_bytes()
-        && need > avail
-    {
-        bail!(
-            "not enough memory: {close} cells near the surface need about {} and {} is \
-             available (PONQ_MEMORY_LIMIT or the system's available memory); mesh a coarser \
-             grid, or --coarsen 1 (PoNQ-lite at half the resolution)",
-            ponq_mesh::memory::gb(need),
-            ponq_mesh::memory::gb(avail)
-        );
-    }
+/// Refuses a run whose cells near the surface would take more memory than is left
+/// (`ponq_mesh::memory::budget`), before any work. The band is already resident, so the
+/// budget (which counts what the process holds) already has it: only the new work is priced.
+fn check_memory(close: usize, points_per_cell: usize) -> Result<()> {
+    let need = close as u64 * points_per_cell as u64 * BYTES_PER_CLOSE_POINT;
+    ponq_mesh::memory::check(
+        need,
+        &format!("the network and the meshing of {close} cells near the surface"),
+        "mesh a coarser grid, or --coarsen 1 (PoNQ-lite at half the resolution)",
+    )?;
     Ok(())
+}
+
+/// The most bytes a grid's band may take while it is built: half of what is left
+/// (`ponq_mesh::memory::budget`); the rest is for the network and the meshing (checked again
+/// before the network runs).
+///
+/// # Errors
+/// An unreadable `PONQ_MEMORY_LIMIT`.
+pub fn band_memory_limit() -> Result<Option<usize>> {
+    Ok(ponq_mesh::memory::available_bytes()?.map(|b| usize::try_from(b / 2).unwrap_or(usize::MAX)))
 }
 
 /// A cell can be kept when all its corners are closer than this (normalised frame) to the
@@ -286,7 +290,21 @@ pub fn predict(
 ) -> Result<Predicted> {
     let frame = Frame::of(grid, opts.bounds)?;
     let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
-    let band = BandGrid::from_dense(grid.dims, &grid.data, frame.scale(), t, reach)?;
+    // Priced plane by plane as it is built (a grid whose surface fills it stores it all).
+    let mut b = ponq_mesh::band::BandBuilder::new(grid.dims, frame.scale(), t, reach)?
+        .with_limit(band_memory_limit()?);
+    let plane = grid.dims[1] * grid.dims[2];
+    if grid.data.len() != grid.dims.iter().product::<usize>() {
+        bail!(
+            "{} values for a grid of {:?} nodes",
+            grid.data.len(),
+            grid.dims
+        );
+    }
+    for p in grid.data.chunks(plane.max(1)) {
+        b.push_plane(p)?;
+    }
+    let band = b.finish()?;
     predict_band(net, encoder_layers, band, opts, device, progress)
 }
 
@@ -343,7 +361,7 @@ pub fn predict_band(
         }
     });
     close.sort_unstable();
-    check_memory(&band, close.len(), net.points_per_cell())?;
+    check_memory(close.len(), net.points_per_cell())?;
     let t0 = Instant::now();
     let (pred, tiles) = predict_cells(
         net,

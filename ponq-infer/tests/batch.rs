@@ -147,14 +147,116 @@ fn folders_shards_and_records() {
     ]);
     assert_eq!(code, Some(2));
     assert!(err.contains("folder or list"), "{err}");
-    // Two inputs of one name would write one output: refused before any work.
+    // Two inputs that differ only by their extension would write one output: refused
+    // before any work.
     let twins = dir.join("twins");
     std::fs::create_dir_all(twins.join("sub")).unwrap();
-    std::fs::copy(repo("examples/csg.obj"), twins.join("a.obj")).unwrap();
+    std::fs::copy(repo("examples/csg.obj"), twins.join("sub/a.obj")).unwrap();
     std::fs::copy(repo("examples/csg_sdf_33.npy"), twins.join("sub/a.npy")).unwrap();
     let (code, err) = infer(&[&os(&twins), "-o".as_ref(), &os(&dir.join("twins-out"))]);
     assert_eq!(code, Some(2));
-    assert!(err.contains("two inputs are named \"a\""), "{err}");
+    assert!(err.contains("would both be written as \"a\""), "{err}");
     assert!(!dir.join("twins-out").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Every `.obj` under `d`, by its path below `d`.
+fn outputs_below(d: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![d.to_path_buf()];
+    while let Some(x) = stack.pop() {
+        for e in std::fs::read_dir(&x).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|e| e == "obj") {
+                let rel = p.strip_prefix(d).unwrap().to_string_lossy().into_owned();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// A dataset laid out as ShapeNet (`a/model.*`, `b/model.*`, `c/model.*`): three outputs
+/// (`OUT/a/model.obj`, ...), the same under `--shard`; a cut output is redone on resume; a
+/// folder whose every input fails exits 2.
+#[test]
+fn shapenet_layout_shards_and_resume() {
+    let dir = common::tmp("shapenet");
+    let input = dir.join("in");
+    for (folder, src) in [
+        ("a", "examples/csg_sdf_33.npy"),
+        ("b", "examples/csg.obj"),
+        ("c", "examples/example001.obj"),
+    ] {
+        std::fs::create_dir_all(input.join(folder)).unwrap();
+        let ext = Path::new(src).extension().unwrap().to_str().unwrap();
+        std::fs::copy(repo(src), input.join(folder).join(format!("model.{ext}"))).unwrap();
+    }
+    let os = |p: &Path| p.as_os_str().to_owned();
+    let args = |out: &Path| -> Vec<std::ffi::OsString> {
+        vec![
+            os(&input),
+            "-o".into(),
+            os(out),
+            "--res".into(),
+            "24".into(),
+            "-q".into(),
+        ]
+    };
+    let whole = dir.join("whole");
+    let a: Vec<std::ffi::OsString> = args(&whole);
+    let (code, err) = infer(&a.iter().map(|x| x.as_os_str()).collect::<Vec<_>>());
+    assert_eq!(code, Some(0), "{err}");
+    let got = outputs_below(&whole);
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        ["a/model.obj", "b/model.obj", "c/model.obj"]
+    );
+    let v: Vec<&Vec<u8>> = got.values().collect();
+    assert!(v[0] != v[1] && v[1] != v[2] && v[0] != v[2]);
+    let sharded = dir.join("sharded");
+    let mut names = Vec::new();
+    for i in 0..3 {
+        let mut a = args(&sharded);
+        a.push("--shard".into());
+        a.push(format!("{i}/3").into());
+        let (code, err) = infer(&a.iter().map(|x| x.as_os_str()).collect::<Vec<_>>());
+        assert_eq!(code, Some(0), "{err}");
+        for r in records(&sharded.join(format!("log-shard-{i}-of-3.jsonl"))) {
+            assert_eq!(r["shards"], 3);
+            names.push(r["name"].as_str().unwrap().to_string());
+        }
+    }
+    names.sort();
+    assert_eq!(names, ["a/model", "b/model", "c/model"]);
+    assert_eq!(outputs_below(&sharded), got);
+    // A mesh cut in the middle (a machine that crashed while writing): redone on resume.
+    let cut = whole.join("c/model.obj");
+    let bytes = std::fs::read(&cut).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let (code, err) = infer(&a.iter().map(|x| x.as_os_str()).collect::<Vec<_>>());
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(outputs_below(&whole), got);
+    let log = records(&whole.join("log.jsonl"));
+    let rerun = &log[3..];
+    assert_eq!(rerun.iter().filter(|r| r["status"] == "already").count(), 2);
+    let redone: Vec<_> = rerun.iter().filter(|r| r["status"] == "done").collect();
+    assert_eq!(redone.len(), 1);
+    assert_eq!(redone[0]["name"], "c/model");
+    // Every input fails: exit 2, and the summary says so.
+    let list = dir.join("missing.txt");
+    std::fs::write(&list, "x.npy\ny.obj\n").unwrap();
+    let (code, err) = infer(&[
+        &os(&list),
+        "-o".as_ref(),
+        &os(&dir.join("none")),
+        "--res".as_ref(),
+        "24".as_ref(),
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("0 meshes written"), "{err}");
+    assert!(err.contains("2 input(s) failed"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -189,3 +189,56 @@ fn too_little_memory_is_a_clear_error() {
         assert!(!out.exists());
     }
 }
+
+/// The memory a container (or Slurm job, or Ray worker) may take is its control group's
+/// limit, not the machine's: a group with little room left is a clear error before the work
+/// (a fake group's files through `PONQ_CGROUP_DIR`); one without a limit lets the run
+/// through. A `PONQ_MEMORY_LIMIT` that is not a size is an error, not "no limit".
+#[test]
+fn container_limits_hold_and_bad_limits_are_errors() {
+    let dir = std::env::temp_dir().join(format!("ponq-fine-cgroup-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out.obj");
+    let run = |env: &[(&str, &std::ffi::OsStr)]| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_ponq-infer"));
+        c.arg(repo("examples/example001_sdf_65.npy"))
+            .arg("-o")
+            .arg(&out)
+            .env_remove("PONQ_MEMORY_LIMIT");
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        let o = c.output().unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    // 12 MB left in the group (v2 files): the band fits in half of it, the cells near the
+    // surface (about 30 MB for this grid) do not.
+    std::fs::write(dir.join("memory.max"), "1012000000\n").unwrap();
+    std::fs::write(dir.join("memory.current"), "1000000000\n").unwrap();
+    let (code, err) = run(&[("PONQ_CGROUP_DIR", dir.as_os_str())]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("not enough memory"), "{err}");
+    assert!(err.contains("cgroup"), "{err}");
+    assert!(!out.exists());
+    // The same group without a limit.
+    std::fs::write(dir.join("memory.max"), "max\n").unwrap();
+    let (code, err) = run(&[("PONQ_CGROUP_DIR", dir.as_os_str())]);
+    assert_eq!(code, Some(0), "{err}");
+    std::fs::remove_file(&out).unwrap();
+    // Units people write parse; anything else is an error before the work.
+    let (code, err) = run(&[("PONQ_MEMORY_LIMIT", "64GiB".as_ref())]);
+    assert_eq!(code, Some(0), "{err}");
+    std::fs::remove_file(&out).unwrap();
+    let (code, err) = run(&[("PONQ_MEMORY_LIMIT", "8 GHz".as_ref())]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("PONQ_MEMORY_LIMIT=\"8 GHz\" is not a size"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -655,9 +655,10 @@ impl BandBuilder {
             && self.values.len() * 8 > l
         {
             return Err(Error::InvalidInput(format!(
-                "the values near the surface of this grid take more than the {} of memory \
-                 available ({} of {} planes read, {} bricks of 8^3 nodes stored): its surface \
-                 fills much of the grid (a noisy field?), or the machine is short of memory",
+                "not enough memory: the values near the surface of this grid take more than \
+                 the {} they may have ({} of {} planes read, {} bricks of 8^3 nodes stored): \
+                 its surface fills much of the grid (a noisy field?), or the machine (or its \
+                 container's limit, or PONQ_MEMORY_LIMIT) is short of memory",
                 crate::memory::gb(l as u64),
                 self.planes_done,
                 d0,

@@ -3,8 +3,10 @@
 `ponq.prepare_meshes` on its shard (the split of `ponq-prep meshes --shard I/N`), the records
 written to one output folder on a shared filesystem, exactly as `ponq-prep meshes` writes them.
 
-Resumable: records already in the output folder are skipped, so the same command after a
-failure (or a lost node) does only what is missing. Each shard appends its records to
+Resumable: records already in the output folder (whole) are skipped, so the same command
+after a failure (or a lost node) does only what is missing. Output names are those of
+`ponq-prep meshes` (the file stem; folders added where stems repeat: OUT/a/model.npz). Exits
+2 when any shape failed. Each shard appends its records to
 OUT/log-shard-I-of-N.jsonl; `ponq-eval log OUT` summarises them.
 
     pip install ./ponq-py[ray]
@@ -47,7 +49,9 @@ def mesh_files(dir_or_list):
 
 @ray.remote(num_cpus=1)
 def prepare_shard(meshes, out, shard, count, res, samples, sample_seed, repair, threads):
-    """One shard of the dataset, in one Ray worker (`threads` cores of it)."""
+    """One shard of the dataset, in one Ray worker (`threads` cores of it). `meshes` is the
+    whole list (names and shards come from all of it); passed as one object of Ray's store,
+    it is stored once and read by every task, not copied into each task's arguments."""
     return ponq.prepare_meshes(
         meshes,
         out,
@@ -77,9 +81,12 @@ def prepare(
     if shards is None:
         # Many small tasks balance shapes of unequal cost; no more tasks than shapes.
         shards = max(1, min(len(meshes), 8 * int(ray.cluster_resources().get("CPU", 1))))
+    # The list once in the object store: each task gets a reference (Ray resolves it to
+    # the list in the worker), not a copy of its own (shards x meshes).
+    meshes_ref = ray.put([str(m) for m in meshes])
     pending = [
         prepare_shard.options(num_cpus=threads).remote(
-            list(meshes), str(out), i, shards, list(res), samples, sample_seed, repair, threads
+            meshes_ref, str(out), i, shards, list(res), samples, sample_seed, repair, threads
         )
         for i in range(shards)
     ]
@@ -106,13 +113,16 @@ def main(argv=None):
     ap.add_argument("--address", help="Ray cluster address ('auto' for the cluster this node is in); default: a local instance")
     ap.add_argument("--num-cpus", type=int, help="CPUs of the local instance")
     a = ap.parse_args(argv)
-    if a.address:
+    if ray.is_initialized():
+        pass  # called from a program that already started Ray
+    elif a.address:
         ray.init(address=a.address)
     else:
         ray.init(num_cpus=a.num_cpus, include_dashboard=False)
     meshes = mesh_files(a.input)
     if not meshes:
-        sys.exit(f"no mesh (.obj, .ply, .off, .stl) in {a.input}")
+        print(f"error: no mesh (.obj, .ply, .off, .stl) in {a.input}", file=sys.stderr)
+        return 2
     t = time.perf_counter()
     records = prepare(
         meshes,
@@ -135,10 +145,18 @@ def main(argv=None):
         f"{a.output}: {by.get('done', 0)} written, {by.get('already', 0)} already there, "
         f"{by.get('error', 0)} failed, in {time.perf_counter() - t:.1f} s"
     )
-    for r in records:
-        if r["status"] == "error":
-            print(f"failed {r['name']}: {r['error']}", file=sys.stderr)
+    failed = [r for r in records if r["status"] == "error"]
+    for r in failed:
+        print(f"failed {r['name']}: {r['error']}", file=sys.stderr)
+    if failed:
+        # Like `ponq-prep meshes`: a batch with a failed shape does not report success.
+        print(
+            f"error: {len(failed)} of {len(records)} shapes failed (see {a.output}/log-shard-*.jsonl)",
+            file=sys.stderr,
+        )
+        return 2
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

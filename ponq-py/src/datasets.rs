@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use ponq_data::prep::{BatchRun, MeshJob, PrepOptions, run_batch_with};
+use ponq_data::prep::{BatchRun, PrepOptions, mesh_jobs, run_batch_with};
 use ponq_data::records::{RecordLog, Shard, default_log};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
@@ -14,10 +14,16 @@ use crate::errors::{Failure, run, value_err};
 /// Prepares mesh files as dataset records into ``out``: ``out/NAME.npz`` per mesh with
 /// ``pointcloud``, ``normals``, ``<res>_sdf`` and ``<res>_occupancy`` in the [-1,1] frame,
 /// exactly as ``ponq-prep meshes`` writes them (the same bytes). Records already in ``out``
-/// are skipped (a re-run resumes); a bad mesh is an error record, not an exception.
+/// are skipped when whole (a re-run resumes; a file cut by a crash is redone); a bad mesh is
+/// an error record, not an exception: check the ``status`` of the records (the Ray example
+/// exits 2 when any is ``"error"``).
 ///
 /// Args:
-///     meshes: mesh file paths (.obj, .ply, .off, .stl); the output name is the file stem.
+///     meshes: mesh file paths (.obj, .ply, .off, .stl): the whole dataset, also with
+///         ``shard`` (names and shards come from the whole list). A mesh's output name is its
+///         file stem; meshes that share a stem are named by their folders, as many as tell
+///         them apart (``a/model``, ``b/model``: ``out/a/model.npz``); two files that differ
+///         only by their extension raise ``ValueError`` before any work.
 ///     out: output folder (created).
 ///     res: grid resolutions (cells per side).
 ///     samples: surface samples per shape.
@@ -31,7 +37,8 @@ use crate::errors::{Failure, run, value_err};
 ///     threads: worker threads (a pool of that size for this call); default all cores.
 ///
 /// Returns:
-///     A list of dicts, one per mesh of the shard: ``name``, ``input``, ``status``
+///     A list of dicts, one per mesh of the shard: ``name``, ``time`` (UTC), ``shards``
+///     (the shard count, 1 unsharded), ``input``, ``status``
 ///     (``"done"``, ``"already"`` or ``"error"``), ``error``, ``stages`` (seconds per
 ///     stage), ``seconds``, ``peak_rss_mb``, ``warning``, ``report`` (the repair's).
 ///
@@ -98,7 +105,7 @@ pub(crate) fn prepare_meshes<'py>(
             Some(p) => Some(RecordLog::append(p)?),
             None => None,
         };
-        let jobs: Vec<MeshJob> = meshes.into_iter().map(MeshJob).collect();
+        let jobs = mesh_jobs(meshes)?;
         let batch = BatchRun {
             shard,
             log: log.as_ref(),

@@ -33,9 +33,9 @@ def binary(name):
     return p
 
 
-def run(args):
+def run(args, code=0):
     r = subprocess.run([str(a) for a in args], capture_output=True, text=True)
-    assert r.returncode == 0, f"{args} failed ({r.returncode}): {r.stderr}"
+    assert r.returncode == code, f"{args} exited {r.returncode}, expected {code}: {r.stderr}"
     return r.stdout
 
 
@@ -541,10 +541,59 @@ def _npz_files(d):
     return {p.name: p.read_bytes() for p in sorted(Path(d).glob("*.npz"))}
 
 
+def _npz_tree(d):
+    """Every record under `d`, by its path below `d` (hidden temporary files excluded)."""
+    return {
+        str(p.relative_to(d)): p.read_bytes()
+        for p in sorted(Path(d).rglob("*.npz"))
+        if not p.name.startswith(".")
+    }
+
+
+def _shapenet(tmp_path):
+    """Three different meshes, each `model.obj` in its own folder (a ShapeNet-style layout)."""
+    d = tmp_path / "shapenet"
+    for folder, src in [("a", "csg.obj"), ("b", "example001.obj")]:
+        (d / folder).mkdir(parents=True)
+        (d / folder / "model.obj").write_bytes((EXAMPLES / src).read_bytes())
+    # The third: example001 with x and y swapped.
+    lines = []
+    for line in (EXAMPLES / "example001.obj").read_text().splitlines():
+        t = line.split()
+        lines.append(f"v {t[2]} {t[1]} {t[3]}" if t[:1] == ["v"] else line)
+    (d / "c").mkdir()
+    (d / "c" / "model.obj").write_text("\n".join(lines) + "\n")
+    return d
+
+
+def test_prepare_meshes_shapenet_layout(tmp_path):
+    d = _shapenet(tmp_path)
+    meshes = sorted(str(p) for p in d.rglob("*.obj"))
+    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "8", "--samples", "2000", "-q"])
+    recs = ponq.prepare_meshes(meshes, str(tmp_path / "py"), res=[8], samples=2000)
+    assert sorted(r["name"] for r in recs) == ["a/model", "b/model", "c/model"]
+    assert all(r["status"] == "done" and r["shards"] == 1 and r["time"].endswith("Z") for r in recs)
+    cli, py = _npz_tree(tmp_path / "cli"), _npz_tree(tmp_path / "py")
+    assert sorted(py) == ["a/model.npz", "b/model.npz", "c/model.npz"]
+    assert cli == py and len(set(py.values())) == 3
+    sharded = tmp_path / "sharded"
+    names = [
+        {r["name"] for r in ponq.prepare_meshes(meshes, str(sharded), res=[8], samples=2000, shard=(i, 3))}
+        for i in range(3)
+    ]
+    assert sum(len(n) for n in names) == 3 and _npz_tree(sharded) == py
+    # Two files that differ only by their extension: refused before any work.
+    (d / "a" / "model.stl").write_bytes(b"solid x\nendsolid x\n")
+    with pytest.raises(ValueError, match="would both be written"):
+        ponq.prepare_meshes(meshes + [str(d / "a" / "model.stl")], str(tmp_path / "twins"))
+    assert not (tmp_path / "twins").exists()
+
+
 def test_prepare_meshes_matches_ponq_prep(tmp_path):
     d = _dataset(tmp_path, count=4)
     meshes = sorted(str(p) for p in d.glob("*.obj"))
-    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "3000", "-q"])
+    # The broken file fails: exit 2.
+    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "3000", "-q"], code=2)
     recs = ponq.prepare_meshes(meshes, str(tmp_path / "py"), res=[16], samples=3000)
     assert _npz_files(tmp_path / "cli") == _npz_files(tmp_path / "py")
     assert sorted(r["status"] for r in recs) == ["done"] * 4 + ["error"]
@@ -568,7 +617,7 @@ def test_ray_prepare_matches_ponq_prep(tmp_path):
     ray_prepare = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ray_prepare)
     d = _dataset(tmp_path, count=20)
-    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "2000", "-q"])
+    run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "2000", "-q"], code=2)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         meshes = ray_prepare.mesh_files(d)
@@ -584,5 +633,15 @@ def test_ray_prepare_matches_ponq_prep(tmp_path):
         assert len(logged) == 21
         again = ray_prepare.prepare(meshes, out, shards=4, res=[16], samples=2000)
         assert sorted(r["status"] for r in again) == ["already"] * 20 + ["error"]
+        # A ShapeNet-style layout: one output per mesh, as ponq-prep writes them.
+        sn = _shapenet(tmp_path)
+        run([binary("ponq-prep"), "meshes", sn, "-o", tmp_path / "sn-cli", "--res", "8", "--samples", "2000", "-q"])
+        recs = ray_prepare.prepare(ray_prepare.mesh_files(sn), tmp_path / "sn-ray", shards=3, res=[8], samples=2000)
+        assert sorted(r["name"] for r in recs) == ["a/model", "b/model", "c/model"]
+        assert _npz_tree(tmp_path / "sn-ray") == _npz_tree(tmp_path / "sn-cli")
+        # The example's command line exits 2 when a shape failed, 0 when all are done.
+        args = [str(d), "-o", str(tmp_path / "ray-cli"), "--res", "16", "--samples", "2000", "--shards", "2"]
+        assert ray_prepare.main(args) == 2
+        assert ray_prepare.main([str(sn), "-o", str(tmp_path / "sn-ray"), "--res", "8", "--samples", "2000"]) == 0
     finally:
         ray.shutdown()

@@ -87,28 +87,42 @@ impl Shape {
     }
 }
 
-/// Shape files of `dir` (`.npz` records of `ponq-prep`, or the authors' `.hdf5` / `.h5`),
-/// sorted, optionally restricted to the ids of a split file.
+/// Shape files of `dir`, searched recursively (`.npz` records of `ponq-prep`, which writes
+/// `OUT/a/model.npz` where file stems repeat, or the authors' `.hdf5` / `.h5`), sorted,
+/// optionally restricted to the ids of a split file: a file's id is its path below `dir`
+/// without the extension (`part_001`, `a/model`).
 pub fn shape_files(dir: &Path, split: Option<&Path>) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list the data folder {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            matches!(
-                p.extension().and_then(|e| e.to_str()),
-                Some("npz" | "hdf5" | "h5")
-            )
-        })
-        .collect();
+    let is_shape = |p: &Path| {
+        matches!(
+            p.extension().and_then(|e| e.to_str()),
+            Some("npz" | "hdf5" | "h5")
+        ) && !p
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with('.'))
+    };
+    if !dir.is_dir() {
+        bail!(
+            "cannot list the data folder {}: not a folder",
+            dir.display()
+        );
+    }
+    let mut files = ponq_data::prep::input_files(dir, is_shape)
+        .with_context(|| format!("cannot list the data folder {}", dir.display()))?;
     files.sort();
     if let Some(split) = split {
         let ids = ponq_data::dataset::read_split(split)
             .with_context(|| format!("cannot read split {}", split.display()))?;
         let set: std::collections::HashSet<&str> = ids.iter().map(String::as_str).collect();
         files.retain(|p| {
-            p.file_stem()
-                .and_then(|s| s.to_str())
-                .is_some_and(|s| set.contains(s))
+            p.strip_prefix(dir)
+                .ok()
+                .map(|rel| rel.with_extension(""))
+                .and_then(|rel| {
+                    rel.to_str()
+                        .map(|r| r.replace(std::path::MAIN_SEPARATOR, "/"))
+                })
+                .is_some_and(|id| set.contains(id.as_str()))
         });
     }
     Ok(files)

@@ -12,7 +12,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::normalize::Normalization;
-use ponq_data::prep::{BatchRun, Job, MeshJob, PrepOptions, SynthJob, mesh_inputs, run_batch_with};
+use ponq_data::prep::{
+    BatchRun, Job, PrepOptions, SynthJob, mesh_inputs, mesh_jobs, run_batch_with,
+};
 use ponq_data::records::RecordLog;
 use ponq_data::repair::{RepairOptions, repair_with_solid};
 use ponq_data::sdf::signed_distance_grid;
@@ -40,8 +42,18 @@ enum Command {
     Sdf(SdfArgs),
     /// Prepare a folder (searched recursively) or a list file of meshes as dataset records:
     /// one OUT/NAME.npz per mesh with `pointcloud`, `normals`, `<res>_sdf` and
-    /// `<res>_occupancy` in the [-1,1] frame. Runs in parallel; shapes already in OUT are
-    /// skipped (a killed run resumes); a bad mesh is skipped with its reason.
+    /// `<res>_occupancy` in the [-1,1] frame.
+    ///
+    /// NAME is the mesh's file stem; meshes that share a stem (a/model.obj, b/model.obj) are
+    /// named by their folders below the input folder, as many as tell them apart
+    /// (OUT/a/model.npz, OUT/b/model.npz); two files that differ only by their extension are
+    /// refused before any work. Runs in parallel. Outputs are written whole or not at all
+    /// (a temporary file, flushed to the disk, then renamed); shapes whose output is already
+    /// in OUT, whole, are not redone (a killed run resumes; a cut file is redone). A bad mesh
+    /// is an error record in the log and the others go on.
+    ///
+    /// Exit codes: 0 when every shape is written or already there; 2 when any failed (the
+    /// summary says how many, each error is printed and in the log) or on bad arguments.
     Meshes(MeshesArgs),
     /// Generate procedural CAD-like shapes (seeds S..S+N) and prepare them like `meshes`,
     /// with their exact analytic surface samples: OUT/synth_SEED.npz.
@@ -377,7 +389,13 @@ fn run_sdf(a: &SdfArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
+/// A batch's outcome: every shape done or already there, or how many failed.
+enum BatchOutcome {
+    AllDone,
+    Failed,
+}
+
+fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<BatchOutcome> {
     if b.res.is_empty() || b.res.iter().any(|r| !RES_RANGE.contains(r)) {
         bail!(
             "--res values must be in {}..={}, got {:?}",
@@ -428,14 +446,14 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
     let s = run_batch_with(jobs, &b.output, &opts, &run, || bar.inc(1))?;
     bar.finish_and_clear();
     for (id, why) in &s.skipped {
-        eprintln!("skipped {id}: {why}");
+        eprintln!("failed {id}: {why}");
     }
     for (id, w) in &s.warnings {
         eprintln!("warning {id}: {w}");
     }
     if !b.quiet {
         println!(
-            "{}: {} shapes written, {} already there, {} skipped, in {:.1} s{}; log {}",
+            "{}: {} shapes written, {} already there, {} failed, in {:.1} s{}; log {}",
             b.output.display(),
             s.done.len(),
             s.already.len(),
@@ -444,8 +462,23 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<()> {
             b.shard.map(|x| format!(" (shard {x})")).unwrap_or_default(),
             log_path.display()
         );
+        if s.stale_removed > 0 {
+            println!(
+                "note: removed {} temporary file(s) of runs that crashed",
+                s.stale_removed
+            );
+        }
     }
-    Ok(())
+    if s.all_done() {
+        return Ok(BatchOutcome::AllDone);
+    }
+    eprintln!(
+        "error: {} of {} shapes failed (each one's error is above and in the log {})",
+        s.skipped.len(),
+        s.records.len(),
+        log_path.display()
+    );
+    Ok(BatchOutcome::Failed)
 }
 
 fn run_break(a: &BreakArgs) -> Result<()> {
@@ -479,7 +512,7 @@ fn run_break(a: &BreakArgs) -> Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
-        Command::Sdf(a) => run_sdf(a),
+        Command::Sdf(a) => run_sdf(a).map(|()| BatchOutcome::AllDone),
         Command::Meshes(a) => mesh_inputs(&a.input)
             .context("listing the input meshes")
             .and_then(|files| {
@@ -489,10 +522,10 @@ fn main() -> ExitCode {
                         a.input.display()
                     );
                 }
-                let jobs: Vec<MeshJob> = files.into_iter().map(MeshJob).collect();
+                let jobs = mesh_jobs(files).context("naming the outputs")?;
                 run_batch_cmd(&jobs, &a.batch)
             }),
-        Command::Break(a) => run_break(a),
+        Command::Break(a) => run_break(a).map(|()| BatchOutcome::AllDone),
         Command::Synth(a) => {
             let synth = SynthOptions {
                 mesh_resolution: a.mesh_resolution,
@@ -508,7 +541,8 @@ fn main() -> ExitCode {
         }
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(BatchOutcome::AllDone) => ExitCode::SUCCESS,
+        Ok(BatchOutcome::Failed) => ExitCode::from(2),
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)

@@ -432,10 +432,25 @@ fn run_broken(a: BrokenArgs) -> Result<()> {
             },
         );
         if let Err(e) = result {
-            bar.suspend(|| eprintln!("skipped {id}: {e:#}"));
+            // The shape itself cannot be evaluated: an error row for each copy it lacks (the
+            // evaluation goes on; a re-run does not try it again).
+            bar.suspend(|| eprintln!("failed {id}: {e:#}"));
+            let mut copies = vec!["clean"];
+            copies.extend(defects.iter().map(|d| d.name()));
+            for copy in copies {
+                if rows.iter().any(|r| &r.shape == id && r.copy == copy) {
+                    continue;
+                }
+                let row = CopyRow::failed(id, &group, copy, format!("{e:#}"));
+                writeln!(file, "{}", row.csv())?;
+                file.flush()?;
+                rows.push(row);
+                bar.inc(1);
+            }
         }
     }
     bar.finish_and_clear();
+    let failed = rows.iter().filter(|r| !r.error.is_empty()).count();
     let table = summary_markdown(&rows);
     let md = a.output.join("summary.md");
     std::fs::write(
@@ -452,6 +467,12 @@ fn run_broken(a: BrokenArgs) -> Result<()> {
     if !a.quiet {
         print!("{table}");
         println!("{}: per copy; {}: this table", csv.display(), md.display());
+    }
+    if failed > 0 {
+        eprintln!(
+            "note: {failed} copies could not be reconstructed (their rows in {} hold the error)",
+            csv.display()
+        );
     }
     Ok(())
 }

@@ -23,7 +23,9 @@ use ponq_model::backend::{BackendKind, device};
 ///
 /// The output is closed, oriented, manifold and free of self-intersections (checked; exit
 /// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 empty
-/// surface (the SDF has no sign change; nothing is written).
+/// surface (the SDF has no sign change; nothing is written). With a folder or list: 0 only
+/// when every input is written (valid) or already there, 2 when any failed (each failure
+/// printed and in the log), else 3 when an output failed the validity check.
 ///
 /// Only the part of the grid near the surface is kept (read plane by plane; for a mesh,
 /// distances are computed there only), so time and memory follow the surface: a 513^3 grid
@@ -40,7 +42,10 @@ struct Args {
     /// (as `ponq-prep sdf` does); the output is then in the mesh's coordinates. A folder
     /// (searched recursively) or a `.txt` list of such files (one path per line, relative to
     /// the list) runs them all into the folder -o, one OUT/NAME.<--format> each (see
-    /// --shard, --log).
+    /// --shard, --log). NAME is the file stem; inputs that share a stem (a/model.obj,
+    /// b/model.obj) are named by their folders, as many as tell them apart (OUT/a/model.obj);
+    /// two inputs that differ only by their extension are refused before any work. Outputs
+    /// already in OUT, whole, are not redone (a killed run resumes).
     input: PathBuf,
     /// Output mesh (`.obj`, `.ply` or `.off`); with a folder or list as input, the output
     /// folder.
@@ -342,7 +347,8 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
                 let (t, reach) = band_parameters(frame.n, net_cfg.encoder_layers, &opts);
                 // The band may take half of what is free; the rest is for the network and
                 // the meshing (checked again before the network runs).
-                let limit = ponq_mesh::memory::available_bytes().map(|b| b as usize / 2);
+                let limit = ponq_infer::reconstruct::band_memory_limit()
+                    .map_err(|e| ponq_mesh::Error::InvalidInput(format!("{e:#}")))?;
                 Ok((frame.scale(), t, reach, limit))
             },
             |done, total| {
@@ -523,9 +529,18 @@ fn batch_inputs(p: &Path) -> Result<Vec<PathBuf>> {
     .with_context(|| format!("listing the inputs of {}", p.display()))
 }
 
-/// `ponq-infer DIR -o OUT`: every input into OUT/NAME.EXT, one log record each; returns the
-/// number of failures.
-fn run_batch(args: &Args) -> Result<usize> {
+/// What a folder or list run did.
+#[derive(Default)]
+struct BatchCounts {
+    done: usize,
+    already: usize,
+    failed: usize,
+    invalid: usize,
+}
+
+/// `ponq-infer DIR -o OUT`: every input into OUT/NAME.EXT (names: `ponq_data::names`), one
+/// log record each.
+fn run_batch(args: &Args) -> Result<BatchCounts> {
     if args.json.is_some() || args.save_ponq.is_some() {
         bail!(
             "--json and --save-ponq name one file: not with a folder or list input (the log holds each input's report)"
@@ -538,22 +553,12 @@ fn run_batch(args: &Args) -> Result<usize> {
             args.input.display()
         );
     }
-    let name = |p: &Path| {
-        p.file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let mut names: Vec<String> = inputs.iter().map(|p| name(p)).collect();
-    names.sort();
-    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        bail!(
-            "two inputs are named {:?}: their outputs would be one file; rename one",
-            w[0]
-        );
-    }
-    let mine: Vec<&PathBuf> = inputs
+    // Distinct names (folders added where stems repeat), or a refusal before any work.
+    let names = ponq_data::names::output_names(&inputs).context("naming the outputs")?;
+    let mine: Vec<(&PathBuf, &String)> = inputs
         .iter()
-        .filter(|p| args.shard.is_none_or(|s| s.contains(&name(p))))
+        .zip(&names)
+        .filter(|(_, n)| args.shard.is_none_or(|s| s.contains(n)))
         .collect();
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating the output folder {}", args.output.display()))?;
@@ -562,30 +567,35 @@ fn run_batch(args: &Args) -> Result<usize> {
         .clone()
         .unwrap_or_else(|| ponq_data::records::default_log(&args.output, args.shard));
     let log = RecordLog::append(&log_path).context("opening the log")?;
+    let stale = ponq_data::outputs::StalePartials::find(&args.output);
     let pb = bar(
         args.quiet,
         "shapes {bar:30} {pos}/{len} [{elapsed} < {eta}] {msg}",
     );
     pb.set_length(mine.len() as u64);
-    let (mut done, mut already, mut failed) = (0, 0, 0);
-    for input in mine {
-        let n = name(input);
+    let mut counts = BatchCounts::default();
+    let mut stale_removed = 0;
+    for (input, n) in mine {
         pb.set_message(n.clone());
-        let output = args.output.join(format!("{n}.{}", args.format));
+        let output = ponq_data::names::output_path(&args.output, n, &args.format);
         let started = Instant::now();
-        let record = if output.is_file() {
-            already += 1;
-            Record::new(&n, input, Status::Already)
+        stale_removed += stale.remove_for(&output);
+        // An output there counts as done only when whole (a run that crashed may have left
+        // a cut file under these rules' predecessors, or a full disk).
+        let cut = output.exists() && !ponq_data::outputs::is_whole(&output, args.open.is_none());
+        let record = if !cut && output.is_file() {
+            counts.already += 1;
+            Record::new(n, input, Status::Already)
         } else {
             let mut one = args.clone();
             one.input = input.clone();
-            // Written under a temporary name, renamed when whole and checked (a killed run
-            // leaves nothing the next run would take as done).
-            let partial = args.output.join(format!(
-                ".{n}.partial-{}.{}",
-                std::process::id(),
-                args.format
-            ));
+            if let Some(dir) = output.parent() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating the folder {}", dir.display()))?;
+            }
+            // Written under a temporary name, committed (flushed, renamed) when whole and
+            // checked: a killed run leaves nothing the next run would take as done.
+            let partial = ponq_data::outputs::partial_path(&output);
             one.output = partial.clone();
             one.quiet = true;
             if !is_mesh_path(input) {
@@ -597,36 +607,40 @@ fn run_batch(args: &Args) -> Result<usize> {
             let mut m = Measured::default();
             let outcome = run_measured(&one, &mut m);
             let mut r = match &outcome {
-                Ok(Outcome::Valid) => Record::new(&n, input, Status::Done),
-                Ok(Outcome::Invalid) => Record::new(&n, input, Status::Done),
+                Ok(Outcome::Valid | Outcome::Invalid) => Record::new(n, input, Status::Done),
                 Ok(Outcome::Empty) => {
-                    let mut r = Record::new(&n, input, Status::Error);
+                    let mut r = Record::new(n, input, Status::Error);
                     r.error = Some("the SDF has no sign change: the surface is empty".into());
                     r
                 }
                 Err(e) => {
-                    let mut r = Record::new(&n, input, Status::Error);
+                    let mut r = Record::new(n, input, Status::Error);
                     r.error = Some(format!("{e:#}"));
                     r
                 }
             };
             if r.status == Status::Done
-                && let Err(e) = std::fs::rename(&partial, &output)
+                && let Err(e) = ponq_data::outputs::commit(&partial, &output)
             {
                 r.status = Status::Error;
-                r.error = Some(format!(
-                    "renaming {} to {}: {e}",
-                    partial.display(),
-                    output.display()
-                ));
+                r.error = Some(format!("{e:#}"));
             }
             if r.status == Status::Done {
-                done += 1;
+                counts.done += 1;
+                if matches!(outcome, Ok(Outcome::Invalid)) {
+                    counts.invalid += 1;
+                }
+                if cut {
+                    r.warning = Some("its output was cut (a run that crashed): redone".into());
+                }
                 r.vertices = Some(m.vertices);
                 r.faces = Some(m.faces);
             } else {
-                failed += 1;
+                counts.failed += 1;
                 let _ = std::fs::remove_file(&partial);
+                if let Some(e) = &r.error {
+                    pb.suspend(|| eprintln!("failed {n}: {e}"));
+                }
             }
             r.stages = m.stages;
             r.valid = m.valid;
@@ -634,6 +648,7 @@ fn run_batch(args: &Args) -> Result<usize> {
             r
         };
         let mut record = record;
+        record.shards = args.shard.map_or(1, |s| s.count());
         record.seconds = started.elapsed().as_secs_f64();
         log.write(&record).context("writing the log")?;
         pb.inc(1);
@@ -641,15 +656,35 @@ fn run_batch(args: &Args) -> Result<usize> {
     pb.finish_and_clear();
     if !args.quiet {
         println!(
-            "{}: {done} meshes written, {already} already there, {failed} failed{}; log {}",
+            "{}: {} meshes written, {} already there, {} failed{}; log {}",
             args.output.display(),
+            counts.done,
+            counts.already,
+            counts.failed,
             args.shard
                 .map(|s| format!(" (shard {s})"))
                 .unwrap_or_default(),
             log_path.display()
         );
+        if stale_removed > 0 {
+            println!("note: removed {stale_removed} temporary file(s) of runs that crashed");
+        }
     }
-    Ok(failed)
+    if counts.failed > 0 {
+        eprintln!(
+            "error: {} input(s) failed (see the log {})",
+            counts.failed,
+            log_path.display()
+        );
+    }
+    if counts.invalid > 0 {
+        eprintln!(
+            "error: {} output(s) failed the validity check (written; `valid: false` in the log {})",
+            counts.invalid,
+            log_path.display()
+        );
+    }
+    Ok(counts)
 }
 
 fn main() -> ExitCode {
@@ -665,11 +700,9 @@ fn main() -> ExitCode {
     }
     if is_batch(&args.input) {
         return match run_batch(&args) {
-            Ok(0) => ExitCode::SUCCESS,
-            Ok(n) => {
-                eprintln!("error: {n} input(s) failed (see the log)");
-                ExitCode::from(2)
-            }
+            Ok(c) if c.failed > 0 => ExitCode::from(2),
+            Ok(c) if c.invalid > 0 => ExitCode::from(3),
+            Ok(_) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("error: {e:#}");
                 ExitCode::from(2)

@@ -5,7 +5,9 @@
 # gives every build the same features of the shared dependencies, so no step builds them again.
 #   1. the programs and the Rust tests of every crate, in the release profile (ponq-py, the
 #      Python module, is tested from Python in step 3: its library has no Rust tests);
-#   2. the README's example commands, as written (tests/readme_examples.sh);
+#   2. the README's example commands, as written (tests/readme_examples.sh), and a dataset of
+#      300 meshes of one file name prepared in 3 shards, killed and resumed
+#      (tests/batch_resume.py: the unsharded run's outputs, byte for byte);
 #   3. the Python package, built into a fresh virtual environment, and its pytest suite;
 #   4. the wgpu tests, in the `gpu-test` profile (no optimisation: the GPU stack is minutes to
 #      optimise and the tests need none of it), and the CUDA backend's type-check in the same
@@ -51,6 +53,11 @@ gpu_features=(--features ponq-train/wgpu,ponq-infer/wgpu)
 step "programs (release)" cargo build --release --bins
 step "tests (release)" cargo test --release --workspace --exclude ponq-py
 step "README examples" tests/readme_examples.sh
+if command -v python3 > /dev/null 2>&1; then
+  step "batch resumed after kill -9" python3 tests/batch_resume.py
+else
+  echo "skipped the batch resume check: no python3 here"
+fi
 step "Python package" python_tests
 # Only the tests whose names say wgpu (one per suite): the rest ran in step 1.
 step "wgpu tests (gpu-test profile)" cargo test --profile gpu-test \

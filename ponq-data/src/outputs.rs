@@ -192,8 +192,9 @@ impl StalePartials {
                 else {
                     continue;
                 };
-                // rest: HOST-PID[.EXT]
+                // rest: HOST-PID[.EXT[.MORE]] (a writer may add its own temporary suffix)
                 let (who, ext) = rest.split_once('.').unwrap_or((rest, ""));
+                let ext = ext.split('.').next().unwrap_or("");
                 let Some((h, pid)) = who.rsplit_once('-') else {
                     continue;
                 };
@@ -311,7 +312,7 @@ mod tests {
         // A file left by a process of this machine that no longer runs (pid far past any
         // pid_max), and one of another machine.
         let dead = out.with_file_name(format!(".a{PARTIAL}{}-4294967290.npz", host()));
-        let other = out.with_file_name(format!(".a{PARTIAL}elsewhere-1.npz"));
+        let other = out.with_file_name(format!(".a{PARTIAL}elsewhere-1.npz.tmp"));
         let mine = partial_path(&out);
         for f in [&dead, &other, &mine] {
             std::fs::write(f, b"x").unwrap();

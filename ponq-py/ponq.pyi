@@ -169,6 +169,7 @@ def prepare_meshes(
     meshes: Sequence[Union[str, os.PathLike[str]]],
     out: Union[str, os.PathLike[str]],
     *,
+    root: Union[None, str, os.PathLike[str]] = None,
     res: Sequence[int] = (32, 64),
     samples: int = 1000000,
     sample_seed: int = 0,
@@ -177,3 +178,7 @@ def prepare_meshes(
     log: Union[None, bool, str, os.PathLike[str]] = None,
     threads: Optional[int] = None,
 ) -> list[Dict[str, Any]]: ...
+def mesh_files(dir_or_list: Union[str, os.PathLike[str]]) -> Tuple[list[str], str]: ...
+def output_names(
+    meshes: Sequence[Union[str, os.PathLike[str]]], *, root: Union[None, str, os.PathLike[str]] = None
+) -> list[str]: ...

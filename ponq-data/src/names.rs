@@ -1,24 +1,31 @@
-//! The output names of a batch's inputs: distinct by construction, the same in every batch
-//! entry point (`ponq-prep meshes`, `ponq-infer DIR`, `ponq.prepare_meshes`, the Ray example)
-//! and the key of the shard hash ([`crate::records::Shard`]).
+//! The output names of a batch's inputs: distinct by construction, stable, the same in every
+//! batch entry point (`ponq-prep meshes`, `ponq-infer DIR`, `ponq.prepare_meshes`, the Ray
+//! example) and the key of the shard hash ([`crate::records::Shard`]).
 //!
-//! A name is the input's file stem. Where inputs share a stem (a dataset laid out as ShapeNet
-//! and many others are: `a/model.obj`, `b/model.obj`), each of them is given its parent
-//! folders, nearest first, until the names differ: `a/model` and `b/model` (the output is then
-//! written into those sub-folders of the output folder). So a dataset whose stems are unique
-//! keeps the names it always had, and no two inputs share an output. Two inputs that differ
-//! only by their extension (`a.obj`, `a.ply` in one folder) cannot be told apart this way:
-//! [`output_names`] refuses them, before any work.
+//! A name is the input's path below the dataset's root folder, without its extension, with `/`
+//! between folders: `part_001` for a file in the root, `a/model` and `b/model` for a dataset
+//! laid out as ShapeNet and many others are (`a/model.obj`, `b/model.obj`; the output is
+//! written into the same sub-folders of the output folder). The root is the folder given, or
+//! the folder of a list file; an input outside it is named by its whole path. So a name
+//! depends on its input and the root only: adding files to a dataset, or listing it at another
+//! time, never renames another input (shards stay put), and a flat folder keeps the names it
+//! always had (the stems). Inputs that would still share an output are refused, before any
+//! work: two that differ only by their extension (`a/model.obj`, `a/model.ply`), one listed
+//! twice, and two whose names differ only by letter case (one file on a case-insensitive
+//! output folder, as macOS and Windows have).
 //!
-//! Invariant: the names of one call are distinct, non-empty, use `/` between folders, and hold
-//! no `.` / `..` component.
+//! Invariant: the names of one call are distinct (also ignoring case), non-empty, use `/`
+//! between folders, and hold no `.` / `..` component.
 //!
 //! ```
-//! use std::path::PathBuf;
+//! use std::path::{Path, PathBuf};
 //! use ponq_data::names::output_names;
 //! let inputs: Vec<PathBuf> =
-//!     ["data/a/model.obj", "data/b/model.obj", "data/c/chair.obj"].map(PathBuf::from).into();
-//! assert_eq!(output_names(&inputs).unwrap(), ["a/model", "b/model", "chair"]);
+//!     ["data/a/model.obj", "data/b/model.obj", "data/chair.obj"].map(PathBuf::from).into();
+//! assert_eq!(
+//!     output_names(&inputs, Path::new("data")).unwrap(),
+//!     ["a/model", "b/model", "chair"]
+//! );
 //! ```
 
 use std::collections::HashMap;
@@ -26,104 +33,60 @@ use std::path::{Component, Path, PathBuf};
 
 use crate::error::{DataError, Result};
 
-/// The output name of every input ([module docs](self)), in the order of `inputs`.
+/// The output name of every input ([module docs](self)) below `root`, in the order of
+/// `inputs`.
 ///
 /// # Errors
 /// An input without a file name, one whose name is not UTF-8, or two inputs that map to one
-/// name (the same path, or the same path but for the extension); the error names both files.
-pub fn output_names(inputs: &[PathBuf]) -> Result<Vec<String>> {
-    // Per input: its stem and parent folders below the inputs' common folder, nearest first.
-    let normals: Vec<PathBuf> = inputs.iter().map(|p| lexical(p)).collect();
-    let root = common_folder(&normals);
-    let mut parts: Vec<Vec<String>> = Vec::with_capacity(inputs.len());
-    for (p, normal) in inputs.iter().zip(&normals) {
-        let normal = normal.strip_prefix(&root).unwrap_or(normal);
-        let stem = normal
+/// name (ignoring case); the error names both files.
+pub fn output_names(inputs: &[PathBuf], root: &Path) -> Result<Vec<String>> {
+    let root = lexical(root);
+    let mut names = Vec::with_capacity(inputs.len());
+    for p in inputs {
+        let normal = lexical(p);
+        let rel = normal.strip_prefix(&root).unwrap_or(&normal);
+        let stem = rel
             .file_stem()
             .ok_or_else(|| DataError::Invalid(format!("{} has no file name", p.display())))?;
-        let mut v = vec![utf8(stem, p)?];
-        if let Some(parent) = normal.parent() {
-            for c in parent.components().rev() {
+        let mut parts: Vec<String> = Vec::new();
+        if let Some(parent) = rel.parent() {
+            for c in parent.components() {
                 if let Component::Normal(s) = c {
-                    v.push(utf8(s, p)?);
+                    parts.push(utf8(s, p)?);
                 }
             }
         }
-        parts.push(v);
+        parts.push(utf8(stem, p)?);
+        names.push(parts.join("/"));
     }
-    // Inputs that share a stem all take the fewest parent folders that tell them apart (the
-    // same number for all of them: one layout per group, e.g. `synset/id/model`).
-    let mut by_stem: HashMap<&str, Vec<usize>> = HashMap::new();
-    for (i, p) in parts.iter().enumerate() {
-        by_stem.entry(p[0].as_str()).or_default().push(i);
-    }
-    let mut names: Vec<String> = parts.iter().map(|p| p[0].clone()).collect();
-    for members in by_stem.values().filter(|g| g.len() > 1) {
-        let deepest = members.iter().map(|&i| parts[i].len()).max().unwrap_or(1);
-        let mut depth = 2;
-        loop {
-            let group: Vec<String> = members.iter().map(|&i| join(&parts[i], depth)).collect();
-            let mut sorted: Vec<&String> = group.iter().collect();
-            sorted.sort_unstable();
-            let twin = sorted
-                .windows(2)
-                .find(|w| w[0] == w[1])
-                .map(|w| w[0].clone());
-            match twin {
-                None => {
-                    for (&i, n) in members.iter().zip(group) {
-                        names[i] = n;
-                    }
-                    break;
+    let mut seen: HashMap<String, usize> = HashMap::new();
+    for (i, n) in names.iter().enumerate() {
+        if let Some(&j) = seen.get(&n.to_lowercase()) {
+            return Err(DataError::Invalid(format!(
+                "{} and {} would both be written as {:?}{} (they differ only by their \
+                 extension or letter case, or are one file twice); rename or drop one",
+                inputs[j].display(),
+                inputs[i].display(),
+                names[j],
+                if names[j] == *n {
+                    String::new()
+                } else {
+                    format!(" / {n:?}")
                 }
-                Some(name) if depth >= deepest => {
-                    let same: Vec<&PathBuf> = members
-                        .iter()
-                        .filter(|&&i| join(&parts[i], depth) == name)
-                        .map(|&i| &inputs[i])
-                        .collect();
-                    return Err(DataError::Invalid(format!(
-                        "{} and {} would both be written as {name:?} (they differ only by \
-                         their extension, or are one file twice); rename or drop one",
-                        same[0].display(),
-                        same[1].display(),
-                    )));
-                }
-                Some(_) => depth += 1,
-            }
+            )));
         }
+        seen.insert(n.to_lowercase(), i);
     }
     Ok(names)
 }
 
-/// The output file of `name` in `out` with extension `ext` (`out/a/model.npz`).
-pub fn output_path(out: &Path, name: &str, ext: &str) -> PathBuf {
-    out.join(format!("{name}.{ext}"))
-}
-
-/// The first `depth` components, outermost first, joined by `/`.
-fn join(parts: &[String], depth: usize) -> String {
-    let mut v: Vec<&str> = parts[..depth.min(parts.len())]
-        .iter()
-        .map(String::as_str)
-        .collect();
-    v.reverse();
-    v.join("/")
-}
-
-fn utf8(s: &std::ffi::OsStr, p: &Path) -> Result<String> {
-    s.to_str().map(str::to_string).ok_or_else(|| {
-        DataError::Invalid(format!(
-            "{} has a name that is not UTF-8: outputs and logs need one",
-            p.display()
-        ))
-    })
-}
-
-/// The deepest folder that holds every path (empty when there is none).
-fn common_folder(paths: &[PathBuf]) -> PathBuf {
+/// The root of a list of inputs given without one (a Python list): their deepest common
+/// folder (empty when they share none). Give the dataset's folder instead when calling on
+/// parts of a dataset, so that every part names its inputs alike.
+pub fn common_folder(paths: &[PathBuf]) -> PathBuf {
+    let normals: Vec<PathBuf> = paths.iter().map(|p| lexical(p)).collect();
     let mut root: Option<Vec<Component<'_>>> = None;
-    for p in paths {
+    for p in &normals {
         let folders: Vec<Component<'_>> =
             p.parent().map_or(Vec::new(), |d| d.components().collect());
         root = Some(match root {
@@ -137,6 +100,20 @@ fn common_folder(paths: &[PathBuf]) -> PathBuf {
         });
     }
     root.unwrap_or_default().iter().collect()
+}
+
+/// The output file of `name` in `out` with extension `ext` (`out/a/model.npz`).
+pub fn output_path(out: &Path, name: &str, ext: &str) -> PathBuf {
+    out.join(format!("{name}.{ext}"))
+}
+
+fn utf8(s: &std::ffi::OsStr, p: &Path) -> Result<String> {
+    s.to_str().map(str::to_string).ok_or_else(|| {
+        DataError::Invalid(format!(
+            "{} has a name that is not UTF-8: outputs and logs need one",
+            p.display()
+        ))
+    })
 }
 
 /// `p` with `.` dropped and each `..` taking out the folder before it (no file system access:
@@ -161,56 +138,63 @@ fn lexical(p: &Path) -> PathBuf {
 mod tests {
     use super::*;
 
-    fn names(v: &[&str]) -> Result<Vec<String>> {
-        output_names(&v.iter().map(PathBuf::from).collect::<Vec<_>>())
+    fn names(v: &[&str], root: &str) -> Result<Vec<String>> {
+        output_names(
+            &v.iter().map(PathBuf::from).collect::<Vec<_>>(),
+            Path::new(root),
+        )
     }
 
     #[test]
-    fn unique_stems_keep_their_names() {
+    fn a_flat_folder_keeps_its_stems() {
         assert_eq!(
-            names(&["d/cad/x.obj", "d/free/y.ply", "z.stl"]).unwrap(),
+            names(&["d/x.obj", "d/y.ply", "d/z.stl"], "d").unwrap(),
             ["x", "y", "z"]
         );
     }
 
     #[test]
-    fn shared_stems_take_their_folders_until_distinct() {
+    fn names_are_paths_below_the_root() {
         // ShapeNet: synset/id/model.obj, ids repeated across synsets.
-        let got = names(&[
-            "s/c0/a/model.obj",
-            "s/c0/b/model.obj",
-            "s/c1/a/model.obj",
-            "s/c1/other.obj",
-        ])
+        let got = names(
+            &[
+                "s/c0/a/model.obj",
+                "s/c0/b/model.obj",
+                "s/c1/a/model.obj",
+                "s/c1/other.obj",
+            ],
+            "s",
+        )
         .unwrap();
-        assert_eq!(got, ["c0/a/model", "c0/b/model", "c1/a/model", "other"]);
-        // One file of a stem group may have fewer folders than the others need.
+        assert_eq!(got, ["c0/a/model", "c0/b/model", "c1/a/model", "c1/other"]);
+        // A name depends on its input and the root only, not on the other inputs.
+        assert_eq!(names(&["s/c0/a/model.obj"], "s").unwrap(), ["c0/a/model"]);
+        // `..` and `.` are resolved before names are taken; inputs outside the root are
+        // named by their whole path.
         assert_eq!(
-            names(&["s/model.obj", "s/x/a/model.obj", "s/y/a/model.obj"]).unwrap(),
-            ["model", "x/a/model", "y/a/model"]
+            names(&["l/x/../p/./m.obj", "/abs/q/m.obj"], "l").unwrap(),
+            ["p/m", "abs/q/m"]
         );
-        // A file at the root beside a same-named one in a folder.
-        assert_eq!(names(&["r/a.obj", "r/sub/a.npy"]).unwrap(), ["a", "sub/a"]);
-        // `..` and `.` are resolved before names are taken.
         assert_eq!(
-            names(&["l/x/../p/./m.obj", "l/q/m.obj"]).unwrap(),
-            ["p/m", "q/m"]
+            common_folder(&["s/c0/a/m.obj", "s/c1/m.obj"].map(PathBuf::from)),
+            PathBuf::from("s")
         );
     }
 
     #[test]
     fn inputs_that_would_share_an_output_are_refused() {
-        let e = names(&["d/a/model.obj", "d/a/model.ply"]).unwrap_err();
+        let e = names(&["d/a/model.obj", "d/a/model.ply"], "d").unwrap_err();
         assert!(e.to_string().contains("would both be written"), "{e}");
-        assert!(names(&["x.obj", "x.obj"]).is_err());
-        assert!(names(&[".."]).is_err());
+        assert!(names(&["x.obj", "x.obj"], "").is_err());
+        assert!(names(&["d/A/Model.obj", "d/a/model.obj"], "d").is_err());
+        assert!(names(&[".."], "").is_err());
     }
 
     proptest::proptest! {
-        /// Whatever the layout, names are distinct (or the call refuses), and each name is a
-        /// suffix of its input's path without the extension.
+        /// Whatever the layout, names are distinct (or the call refuses), and each name is the
+        /// input's path below the root without the extension.
         #[test]
-        fn names_are_distinct_suffixes(
+        fn names_are_distinct_paths(
             files in proptest::collection::vec(
                 (proptest::collection::vec(0u8..3, 0..4), 0u8..3, 0u8..2), 1..30)
         ) {
@@ -228,15 +212,15 @@ mod tests {
             let mut unique = paths.clone();
             unique.sort();
             unique.dedup();
-            match output_names(&unique) {
+            match output_names(&unique, Path::new("root")) {
                 Ok(n) => {
                     let mut s = n.clone();
                     s.sort();
                     s.dedup();
                     proptest::prop_assert_eq!(s.len(), n.len());
                     for (p, name) in unique.iter().zip(&n) {
-                        let full = p.with_extension("");
-                        proptest::prop_assert!(full.to_string_lossy().ends_with(name.as_str()));
+                        let rel = p.strip_prefix("root").unwrap().with_extension("");
+                        proptest::prop_assert_eq!(rel.to_string_lossy(), name.as_str());
                     }
                 }
                 Err(_) => {

@@ -27,6 +27,10 @@ use crate::error::{DataError, Result};
 /// The marker between an output's name and the writer's identity in a temporary file name.
 const PARTIAL: &str = ".partial-";
 
+/// How long a temporary file of another machine (or an older version) must be untouched to
+/// count as left by a crashed run: no shape takes that long to write.
+pub const FOREIGN_STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(6 * 3600);
+
 /// This machine's name (`/proc/sys/kernel/hostname`, else `$HOSTNAME`, else `host`), with
 /// every character but letters, digits and `-` replaced by `-`.
 fn host() -> String {
@@ -86,25 +90,42 @@ pub fn commit(partial: &Path, output: &Path) -> Result<()> {
 }
 
 /// Whether `path` is a whole output: an `.npz` whose zip directory ends the file where its
-/// end record says (a cut file has no end record), a mesh (`.obj`, `.ply`, `.off`) that reads
-/// back with at least one face and, when `closed`, no boundary edge (a cut text file loses
-/// its last faces). Any other file: it exists and is not empty.
-pub fn is_whole(path: &Path, closed: bool) -> bool {
+/// end record says (a cut file has no end record); a mesh (`.obj`, `.ply`, `.off`) that reads
+/// back with at least one face and, for an OBJ this project wrote, the vertex and triangle
+/// counts of its first line (a cut text file loses its last lines; PLY and OFF headers hold
+/// their counts, which the readers check). Whether the mesh is valid is another matter (the
+/// log says). Any other file: it exists and is not empty.
+pub fn is_whole(path: &Path) -> bool {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("npz") => zip_is_whole(path).unwrap_or(false),
-        Some("obj" | "ply" | "off") => match ponq_mesh::io::read_mesh(path) {
+        Some(e @ ("obj" | "ply" | "off")) => match ponq_mesh::io::read_mesh(path) {
             Ok(m) => {
                 !m.faces.is_empty()
-                    && (!closed || ponq_mesh::validity::check_topology(&m).boundary_edges == 0)
+                    && (e != "obj"
+                        || obj_header_counts(path)
+                            .is_none_or(|c| c == (m.vertices.len(), m.faces.len())))
             }
             Err(_) => false,
         },
         _ => std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() > 0),
     }
+}
+
+/// The counts of the first line `# V vertices, F triangles, ...` that this project's OBJ
+/// writer puts first; `None` for another file.
+fn obj_header_counts(path: &Path) -> Option<(usize, usize)> {
+    use std::io::BufRead;
+    let f = std::fs::File::open(path).ok()?;
+    let mut line = String::new();
+    std::io::BufReader::new(f).read_line(&mut line).ok()?;
+    let rest = line.strip_prefix("# ")?;
+    let (v, rest) = rest.split_once(" vertices, ")?;
+    let (f, _) = rest.split_once(" triangles")?;
+    Some((v.trim().parse().ok()?, f.trim().parse().ok()?))
 }
 
 /// A zip file (an `.npz`) ends with its end-of-central-directory record (no comment: the
@@ -113,7 +134,19 @@ pub fn is_whole(path: &Path, closed: bool) -> bool {
 fn zip_is_whole(path: &Path) -> std::io::Result<bool> {
     let mut f = std::fs::File::open(path)?;
     let len = f.metadata()?.len();
-    let tail_len = len.min(22 + 65_535);
+    // The end record is the last 22 bytes when there is no comment (always, for the files
+    // this project writes): read those first, and search further back only if need be.
+    for window in [22u64, 22 + 65_535] {
+        if let Some(ok) = zip_end(&mut f, len, window)? {
+            return Ok(ok);
+        }
+    }
+    Ok(false)
+}
+
+/// [`zip_is_whole`] on the last `window` bytes: `None` when no end record is found there.
+fn zip_end(f: &mut std::fs::File, len: u64, window: u64) -> std::io::Result<Option<bool>> {
+    let tail_len = len.min(window);
     f.seek(SeekFrom::Start(len - tail_len))?;
     let mut tail = vec![0u8; tail_len as usize];
     f.read_exact(&mut tail)?;
@@ -139,19 +172,21 @@ fn zip_is_whole(path: &Path) -> std::io::Result<bool> {
                 let at = u64_at(&loc, 8);
                 let mut rec = [0u8; 56];
                 if at.checked_add(56).is_none_or(|end| end > record_at - 20) {
-                    return Ok(false);
+                    return Ok(Some(false));
                 }
                 f.seek(SeekFrom::Start(at))?;
                 f.read_exact(&mut rec)?;
-                return Ok(u32_at(&rec, 0) == 0x0606_4b50
-                    && u64_at(&rec, 48).checked_add(u64_at(&rec, 40)) == Some(at));
+                return Ok(Some(
+                    u32_at(&rec, 0) == 0x0606_4b50
+                        && u64_at(&rec, 48).checked_add(u64_at(&rec, 40)) == Some(at),
+                ));
             }
         }
         let cd_size = u64::from(u32_at(&tail, start + 12));
         let cd_offset = u64::from(u32_at(&tail, start + 16));
-        return Ok(cd_offset + cd_size == record_at);
+        return Ok(Some(cd_offset + cd_size == record_at));
     }
-    Ok(false)
+    Ok(None)
 }
 
 fn u64_at(b: &[u8], i: usize) -> u64 {
@@ -168,11 +203,26 @@ pub struct StalePartials {
 }
 
 impl StalePartials {
-    /// Every temporary file under `out` (recursively) that no live process of this machine
-    /// is writing: files of another machine are left to it, unless their output is being
-    /// written here ([`Self::remove_for`]: the shard of a name runs in one place at a time).
+    /// Every temporary file under `out` (recursively) that no live writer holds: on this
+    /// machine, one whose process no longer runs; of another machine (or of an older version
+    /// of this program, which named files by process only), one untouched for
+    /// [`FOREIGN_STALE_AFTER`] (its writer may still be at work: leaving it costs disk only,
+    /// since every writer writes its own file).
     pub fn find(out: &Path) -> Self {
         let me = host();
+        let now = std::time::SystemTime::now();
+        let old_enough = |p: &Path| {
+            std::fs::metadata(p)
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| now.duration_since(t).ok())
+                .is_some_and(|age| age >= FOREIGN_STALE_AFTER)
+        };
+        let alive = |pid: &str| {
+            pid.parse::<u32>().is_ok_and(|pid| {
+                pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists()
+            })
+        };
         let mut by_output: HashMap<PathBuf, Vec<PathBuf>> = HashMap::new();
         let mut stack = vec![out.to_path_buf()];
         while let Some(d) = stack.pop() {
@@ -192,17 +242,15 @@ impl StalePartials {
                 else {
                     continue;
                 };
-                // rest: HOST-PID[.EXT[.MORE]] (a writer may add its own temporary suffix)
+                // rest: HOST-PID[.EXT[.MORE]] (a writer may add its own temporary suffix), or
+                // PID[.EXT] from older versions.
                 let (who, ext) = rest.split_once('.').unwrap_or((rest, ""));
                 let ext = ext.split('.').next().unwrap_or("");
-                let Some((h, pid)) = who.rsplit_once('-') else {
-                    continue;
+                let stale = match who.rsplit_once('-') {
+                    Some((h, pid)) if h == me => !alive(pid),
+                    _ => old_enough(&p),
                 };
-                let live = h == me
-                    && pid.parse::<u32>().is_ok_and(|pid| {
-                        pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists()
-                    });
-                if live {
+                if !stale {
                     continue;
                 }
                 let output = if ext.is_empty() {
@@ -259,13 +307,13 @@ mod tests {
             }],
         )
         .unwrap();
-        assert!(is_whole(&npz, true));
+        assert!(is_whole(&npz));
         let bytes = std::fs::read(&npz).unwrap();
         for cut in [bytes.len() - 1, bytes.len() - 30, bytes.len() / 2, 10, 0] {
             std::fs::write(&npz, &bytes[..cut]).unwrap();
-            assert!(!is_whole(&npz, true), "cut at {cut} of {}", bytes.len());
+            assert!(!is_whole(&npz), "cut at {cut} of {}", bytes.len());
         }
-        // A closed mesh cut anywhere in its faces is not whole (its last faces are lost).
+        // A mesh cut anywhere is not whole, in every format; an open one is whole.
         let obj = d.join("m.obj");
         let v: Vec<[f64; 3]> = (0..8)
             .map(|i| [f64::from(i & 1), f64::from((i >> 1) & 1), f64::from(i >> 2)])
@@ -285,11 +333,26 @@ mod tests {
             [3, 7, 5],
         ];
         let cube = ponq_mesh::TriMesh::new(v, f).unwrap();
-        ponq_mesh::io::write_mesh(&obj, &cube).unwrap();
-        assert!(is_whole(&obj, true));
-        let text = std::fs::read(&obj).unwrap();
-        std::fs::write(&obj, &text[..text.len() - 10]).unwrap();
-        assert!(!is_whole(&obj, true));
+        for ext in ["obj", "ply", "off"] {
+            let path = d.join(format!("m.{ext}"));
+            ponq_mesh::io::write_mesh(&path, &cube).unwrap();
+            assert!(is_whole(&path), "{ext}");
+            let bytes = std::fs::read(&path).unwrap();
+            // Cut inside the faces, at a line end of the faces, in the vertices.
+            let last_faces = bytes.len() - bytes.len() / 8;
+            let line_end = bytes[..bytes.len() - 2]
+                .iter()
+                .rposition(|&b| b == b'\n')
+                .map_or(bytes.len() / 2, |i| i + 1);
+            for cut in [last_faces, line_end, bytes.len() / 3] {
+                std::fs::write(&path, &bytes[..cut]).unwrap();
+                assert!(!is_whole(&path), "{ext} cut at {cut} of {}", bytes.len());
+            }
+        }
+        let mut open = cube.clone();
+        open.faces.pop();
+        ponq_mesh::io::write_mesh(&obj, &open).unwrap();
+        assert!(is_whole(&obj));
         std::fs::remove_dir_all(&d).ok();
     }
 
@@ -310,17 +373,31 @@ mod tests {
         commit(&p, &out).unwrap();
         assert!(!p.exists() && out.is_file());
         // A file left by a process of this machine that no longer runs (pid far past any
-        // pid_max), and one of another machine.
+        // pid_max); one of another machine and one of an older version, both recent (their
+        // writers may be at work) and both old.
         let dead = out.with_file_name(format!(".a{PARTIAL}{}-4294967290.npz", host()));
         let other = out.with_file_name(format!(".a{PARTIAL}elsewhere-1.npz.tmp"));
+        let older = out.with_file_name(format!(".a{PARTIAL}4294967290.npz"));
         let mine = partial_path(&out);
-        for f in [&dead, &other, &mine] {
+        for f in [&dead, &other, &older, &mine] {
             std::fs::write(f, b"x").unwrap();
         }
         let stale = StalePartials::find(&d);
-        assert_eq!(stale.len(), 2, "{stale:?}");
+        assert_eq!(stale.len(), 1, "{stale:?}");
+        assert_eq!(stale.remove_for(&out), 1);
+        assert!(!dead.exists() && other.exists() && older.exists() && mine.exists());
+        let long_ago = std::time::SystemTime::now() - FOREIGN_STALE_AFTER * 2;
+        for f in [&other, &older] {
+            std::fs::File::options()
+                .write(true)
+                .open(f)
+                .unwrap()
+                .set_modified(long_ago)
+                .unwrap();
+        }
+        let stale = StalePartials::find(&d);
         assert_eq!(stale.remove_for(&out), 2);
-        assert!(!dead.exists() && !other.exists() && mine.exists());
+        assert!(!other.exists() && !older.exists() && mine.exists());
         std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -295,7 +295,7 @@ pub fn run_batch_with<J: Job>(
         if removed > 0 {
             push(&|s| s.stale_removed += removed);
         }
-        let cut = path.exists() && !crate::outputs::is_whole(&path, false);
+        let cut = path.exists() && !crate::outputs::is_whole(&path);
         let record = if !cut && path.is_file() {
             push(&|s| s.already.push(id.clone()));
             Record::new(&id, job.input(), Status::Already)
@@ -382,12 +382,14 @@ pub struct MeshJob {
     pub name: String,
 }
 
-/// The jobs of a batch of mesh files, named by [`crate::names::output_names`].
+/// The jobs of a batch of mesh files below the dataset's folder `root`, named by
+/// [`crate::names::output_names`].
 ///
 /// # Errors
-/// Two files that would share an output (they differ by their extension only).
-pub fn mesh_jobs(files: Vec<PathBuf>) -> Result<Vec<MeshJob>> {
-    let names = crate::names::output_names(&files)?;
+/// Two files that would share an output (they differ by their extension or letter case
+/// only).
+pub fn mesh_jobs(files: Vec<PathBuf>, root: &Path) -> Result<Vec<MeshJob>> {
+    let names = crate::names::output_names(&files, root)?;
     Ok(files
         .into_iter()
         .zip(names)
@@ -429,6 +431,16 @@ impl Job for SynthJob {
         so.samples = opts.samples;
         let s = crate::synth::generate(self.seed, &so)?;
         prepare_synth(&s, self.seed, opts)
+    }
+}
+
+/// The root of a batch's inputs (their names are their paths below it,
+/// [`crate::names`]): the folder itself, or the folder of a list file.
+pub fn input_root(dir_or_list: &Path) -> PathBuf {
+    if dir_or_list.is_dir() {
+        dir_or_list.to_path_buf()
+    } else {
+        dir_or_list.parent().unwrap_or(Path::new("")).to_path_buf()
     }
 }
 

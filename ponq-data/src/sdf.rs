@@ -949,7 +949,7 @@ impl MeshSdf {
         // Priced before the distances: per node, f32 distances (twice with another solid)
         // and the band's f64 value.
         let b3_bytes = (BRICK * BRICK * BRICK) as u64;
-        ponq_mesh::memory::check(
+        let _reserved = ponq_mesh::memory::reserve(
             list.len() as u64 * b3_bytes * (8 + if same { 4 } else { 8 }),
             &format!(
                 "the distances near the surface ({} bricks of 8^3 nodes at {n1}^3)",

@@ -152,7 +152,7 @@ fn shapenet_layout_gives_every_shape_its_output_sharded_or_not() {
     let (code, text) = prep(&twins, &out, &[]);
     assert_eq!(code, Some(2), "{text}");
     assert!(
-        text.contains("would both be written as \"model\""),
+        text.contains("would both be written as \"x/model\""),
         "{text}"
     );
     assert!(!out.exists());

@@ -15,7 +15,7 @@ fn batch_prepares_skips_and_resumes() {
     std::fs::write(input.join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
     let files = mesh_inputs(&input).unwrap();
     assert_eq!(files.len(), 2);
-    let jobs = mesh_jobs(files).unwrap();
+    let jobs = mesh_jobs(files, &input).unwrap();
     let opts = PrepOptions {
         resolutions: vec![8, 16],
         samples: 5000,

@@ -196,7 +196,7 @@ pub fn field_band(
     let b3 = BRICK * BRICK * BRICK;
     // Priced before the field runs on them: the bricks' values, held twice while the band
     // is assembled.
-    ponq_mesh::memory::check(
+    let _reserved = ponq_mesh::memory::reserve(
         (list.len() * b3 * 16) as u64,
         &format!(
             "the field's values near its surface ({} bricks of 8^3 nodes at {n1}^3)",

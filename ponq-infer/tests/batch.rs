@@ -9,20 +9,6 @@ use std::path::Path;
 mod common;
 use common::{repo, run as infer};
 
-fn outputs(d: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(d)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
-        .map(|p| {
-            (
-                p.file_name().unwrap().to_string_lossy().into_owned(),
-                std::fs::read(&p).unwrap(),
-            )
-        })
-        .collect()
-}
-
 fn records(path: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(path)
         .unwrap()
@@ -76,7 +62,7 @@ fn folders_shards_and_records() {
     assert_eq!(code, Some(0), "{err}");
     assert_eq!(
         std::fs::read(&single).unwrap(),
-        std::fs::read(whole.join("part_b.obj")).unwrap()
+        std::fs::read(whole.join("sub/part_b.obj")).unwrap()
     );
     // Three shards into one folder: the same outputs, each input in one shard's log.
     let sharded = dir.join("sharded");
@@ -98,8 +84,8 @@ fn folders_shards_and_records() {
         }
     }
     names.sort();
-    assert_eq!(names, ["bad", "grid_a", "part_b", "part_c"]);
-    assert_eq!(outputs(&whole), outputs(&sharded));
+    assert_eq!(names, ["bad", "grid_a", "part_c", "sub/part_b"]);
+    assert_eq!(outputs_below(&whole), outputs_below(&sharded));
     // A re-run redoes nothing that is done.
     infer(&[
         &os(&input),
@@ -125,9 +111,15 @@ fn folders_shards_and_records() {
         "-q".as_ref(),
     ]);
     assert_eq!(code, Some(0), "{err}");
-    let got = outputs(&listed);
-    assert_eq!(got.keys().collect::<Vec<_>>(), ["grid_a.obj", "part_b.obj"]);
-    assert_eq!(got["part_b.obj"], outputs(&whole)["part_b.obj"]);
+    let got = outputs_below(&listed);
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        ["grid_a.obj", "sub/part_b.obj"]
+    );
+    assert_eq!(
+        got["sub/part_b.obj"],
+        outputs_below(&whole)["sub/part_b.obj"]
+    );
     // Flags of one input are refused with a folder.
     let (code, err) = infer(&[
         &os(&input),
@@ -155,7 +147,7 @@ fn folders_shards_and_records() {
     std::fs::copy(repo("examples/csg_sdf_33.npy"), twins.join("sub/a.npy")).unwrap();
     let (code, err) = infer(&[&os(&twins), "-o".as_ref(), &os(&dir.join("twins-out"))]);
     assert_eq!(code, Some(2));
-    assert!(err.contains("would both be written as \"a\""), "{err}");
+    assert!(err.contains("would both be written as \"sub/a\""), "{err}");
     assert!(!dir.join("twins-out").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

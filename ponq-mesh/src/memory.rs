@@ -113,23 +113,73 @@ pub fn available_bytes() -> Result<Option<u64>, crate::Error> {
     Ok(budget()?.map(|b| b.bytes))
 }
 
-/// Refuses work that needs `need` more bytes than the [`budget`]: `what` names the work in
-/// the message (e.g. "the grid's values near its surface"), `hint` says what to try.
+/// Bytes that work running now in this process has reserved ([`reserve`]) and may not hold
+/// yet: shapes of a batch run in parallel, and each checks against the same budget.
+static RESERVED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Memory reserved by [`reserve`] for a piece of work, given back when dropped.
+#[derive(Debug)]
+pub struct Reservation(u64);
+
+impl Drop for Reservation {
+    fn drop(&mut self) {
+        RESERVED.fetch_sub(self.0, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Reserves `need` bytes for work about to start, or refuses it when the [`budget`] less what
+/// other work of this process has reserved is short: `what` names the work in the message
+/// (e.g. "the grid's values near its surface"), `hint` says what to try. Keep the returned
+/// guard while the work holds its memory.
 ///
 /// # Errors
 /// Not enough memory, or a [`budget`] error.
-pub fn check(need: u64, what: &str, hint: &str) -> Result<(), crate::Error> {
-    if let Some(b) = budget()?
-        && need > b.bytes
-    {
-        return Err(crate::Error::InvalidInput(format!(
-            "not enough memory: {what} need about {} and {} is available ({}); {hint}",
-            gb(need),
-            gb(b.bytes),
-            b.source
-        )));
+pub fn reserve(need: u64, what: &str, hint: &str) -> Result<Reservation, crate::Error> {
+    use std::sync::atomic::Ordering;
+    let budget = budget()?;
+    // Reserved first, then checked: two workers never both take the last bytes.
+    let before = RESERVED.fetch_add(need, Ordering::SeqCst);
+    let guard = Reservation(need);
+    if let Some(b) = budget {
+        let left = b.bytes.saturating_sub(before);
+        if need > left {
+            return Err(crate::Error::InvalidInput(format!(
+                "not enough memory: {what} need about {} and {} is available ({}{}); {hint}",
+                gb(need),
+                gb(left),
+                b.source,
+                if before > 0 {
+                    format!(
+                        ", less {} that work running beside it has taken",
+                        gb(before)
+                    )
+                } else {
+                    String::new()
+                }
+            )));
+        }
     }
-    Ok(())
+    Ok(guard)
+}
+
+/// Refuses work that needs `need` more bytes than [`reserve`] can give (the check alone, for
+/// work that holds its memory as soon as it starts).
+///
+/// # Errors
+/// As [`reserve`].
+pub fn check(need: u64, what: &str, hint: &str) -> Result<(), crate::Error> {
+    reserve(need, what, hint).map(drop)
+}
+
+/// Gives the memory the allocator keeps after [`keep_freed_memory`] back to the system (glibc's
+/// `malloc_trim`): between the shapes of a batch, so that one shape's peak does not shrink the
+/// next one's [`budget`]. Does nothing on other platforms.
+pub fn release_freed() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: `malloc_trim` only returns free heap pages to the kernel; it is thread-safe.
+    unsafe {
+        libc::malloc_trim(0);
+    }
 }
 
 /// `MemAvailable` of `/proc/meminfo`.

@@ -28,33 +28,21 @@ import ray
 
 import ponq
 
-MESH_EXTENSIONS = {".obj", ".ply", ".off", ".stl"}
-
-
 def mesh_files(dir_or_list):
-    """The mesh files of a folder (recursively) or a list file, sorted: what `ponq-prep
-    meshes` takes."""
-    p = Path(dir_or_list)
-    if p.is_dir():
-        files = [f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in MESH_EXTENSIONS]
-    else:
-        base = p.parent
-        files = [
-            base / line.strip()
-            for line in p.read_text().splitlines()
-            if line.strip() and not line.strip().startswith("#")
-        ]
-    return sorted(str(f) for f in files)
+    """The mesh files of a folder (recursively) or a list file, sorted, and the dataset's
+    root: what `ponq-prep meshes` takes (listed by the same code, `ponq.mesh_files`)."""
+    return ponq.mesh_files(str(dir_or_list))
 
 
 @ray.remote(num_cpus=1)
-def prepare_shard(meshes, out, shard, count, res, samples, sample_seed, repair, threads):
+def prepare_shard(meshes, root, out, shard, count, res, samples, sample_seed, repair, threads):
     """One shard of the dataset, in one Ray worker (`threads` cores of it). `meshes` is the
     whole list (names and shards come from all of it); passed as one object of Ray's store,
     it is stored once and read by every task, not copied into each task's arguments."""
     return ponq.prepare_meshes(
         meshes,
         out,
+        root=root,
         res=res,
         samples=samples,
         sample_seed=sample_seed,
@@ -68,6 +56,7 @@ def prepare(
     meshes,
     out,
     *,
+    root=None,
     shards=None,
     res=(32, 64),
     samples=1_000_000,
@@ -76,7 +65,12 @@ def prepare(
     threads=1,
     progress=None,
 ):
-    """Runs every shard as a Ray task (Ray must be initialised); returns all records."""
+    """Runs every shard as a Ray task (Ray must be initialised); returns all records. `root`:
+    the dataset's folder (output names are the meshes' paths below it); default their
+    deepest common folder."""
+    # Names checked here, once, before any task runs (ValueError when two meshes would share
+    # an output).
+    ponq.output_names(list(meshes), root=root)
     os.makedirs(out, exist_ok=True)
     if shards is None:
         # Many small tasks balance shapes of unequal cost; no more tasks than shapes.
@@ -86,7 +80,8 @@ def prepare(
     meshes_ref = ray.put([str(m) for m in meshes])
     pending = [
         prepare_shard.options(num_cpus=threads).remote(
-            meshes_ref, str(out), i, shards, list(res), samples, sample_seed, repair, threads
+            meshes_ref, None if root is None else str(root), str(out), i, shards, list(res), samples,
+            sample_seed, repair, threads
         )
         for i in range(shards)
     ]
@@ -119,24 +114,34 @@ def main(argv=None):
         ray.init(address=a.address)
     else:
         ray.init(num_cpus=a.num_cpus, include_dashboard=False)
-    meshes = mesh_files(a.input)
+    try:
+        meshes, root = mesh_files(a.input)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     if not meshes:
         print(f"error: no mesh (.obj, .ply, .off, .stl) in {a.input}", file=sys.stderr)
         return 2
     t = time.perf_counter()
-    records = prepare(
-        meshes,
-        a.output,
-        shards=a.shards,
-        res=[int(r) for r in a.res.split(",")],
-        samples=a.samples,
-        sample_seed=a.sample_seed,
-        repair=not a.no_repair,
-        threads=a.threads,
-        progress=lambda done, total, n: print(
-            f"\r{done}/{total} shards, {n} shapes", end="", file=sys.stderr, flush=True
-        ),
-    )
+    try:
+        records = prepare(
+            meshes,
+            a.output,
+            root=root,
+            shards=a.shards,
+            res=[int(r) for r in a.res.split(",")],
+            samples=a.samples,
+            sample_seed=a.sample_seed,
+            repair=not a.no_repair,
+            threads=a.threads,
+            progress=lambda done, total, n: print(
+                f"\r{done}/{total} shards, {n} shapes", end="", file=sys.stderr, flush=True
+            ),
+        )
+    except ValueError as e:
+        # Two meshes that would share an output: refused before any task runs.
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     print(file=sys.stderr)
     by = {}
     for r in records:

@@ -19,11 +19,12 @@ use crate::errors::{Failure, run, value_err};
 /// exits 2 when any is ``"error"``).
 ///
 /// Args:
-///     meshes: mesh file paths (.obj, .ply, .off, .stl): the whole dataset, also with
-///         ``shard`` (names and shards come from the whole list). A mesh's output name is its
-///         file stem; meshes that share a stem are named by their folders, as many as tell
-///         them apart (``a/model``, ``b/model``: ``out/a/model.npz``); two files that differ
-///         only by their extension raise ``ValueError`` before any work.
+///     meshes: mesh file paths (.obj, .ply, .off, .stl). A mesh's output name is its path
+///         below ``root`` without the extension (``a/model``: ``out/a/model.npz``); two files
+///         that differ only by their extension or letter case raise ``ValueError`` before
+///         any work.
+///     root: the dataset's folder; default the deepest folder common to ``meshes`` (give
+///         it when calling on parts of a dataset, so that every part names alike).
 ///     out: output folder (created).
 ///     res: grid resolutions (cells per side).
 ///     samples: surface samples per shape.
@@ -47,14 +48,15 @@ use crate::errors::{Failure, run, value_err};
 ///     raise ``RuntimeError``.
 #[pyfunction]
 #[pyo3(
-    signature = (meshes, out, *, res=vec![32, 64], samples=1_000_000, sample_seed=0, repair=true, shard=None, log=None, threads=None),
-    text_signature = "(meshes, out, *, res=[32, 64], samples=1000000, sample_seed=0, repair=True, shard=None, log=None, threads=None)"
+    signature = (meshes, out, *, root=None, res=vec![32, 64], samples=1_000_000, sample_seed=0, repair=true, shard=None, log=None, threads=None),
+    text_signature = "(meshes, out, *, root=None, res=[32, 64], samples=1000000, sample_seed=0, repair=True, shard=None, log=None, threads=None)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn prepare_meshes<'py>(
     py: Python<'py>,
     meshes: Vec<PathBuf>,
     out: PathBuf,
+    root: Option<PathBuf>,
     res: Vec<usize>,
     samples: usize,
     sample_seed: u64,
@@ -99,13 +101,15 @@ pub(crate) fn prepare_meshes<'py>(
         repair,
     };
     let lines: Vec<String> = run(py, threads, move || {
+        // Named (and refused when two would share an output) before anything is written.
+        let root = root.unwrap_or_else(|| ponq_data::names::common_folder(&meshes));
+        let jobs = mesh_jobs(meshes, &root)?;
         std::fs::create_dir_all(&out)
             .map_err(|e| Failure::Runtime(format!("creating {}: {e}", out.display())))?;
         let log = match &log_path {
             Some(p) => Some(RecordLog::append(p)?),
             None => None,
         };
-        let jobs = mesh_jobs(meshes)?;
         let batch = BatchRun {
             shard,
             log: log.as_ref(),
@@ -119,4 +123,43 @@ pub(crate) fn prepare_meshes<'py>(
         list.append(json.call_method1("loads", (l,))?)?;
     }
     Ok(list)
+}
+
+/// The mesh files of a dataset as ``ponq-prep meshes`` lists them: a folder searched
+/// recursively (.obj, .ply, .off, .stl, sorted), or a text file of paths (one per line,
+/// relative to its folder; ``#`` starts a comment), and the dataset's root (the folder, or the
+/// list's folder): give both to ``prepare_meshes(files, out, root=root)`` so that its names
+/// and shards are those of ``ponq-prep meshes``.
+///
+/// Returns:
+///     ``(files, root)``: a list of paths (str) and the root (str).
+///
+/// Raises:
+///     ValueError: a folder or list that cannot be read.
+#[pyfunction]
+#[pyo3(text_signature = "(dir_or_list)")]
+pub(crate) fn mesh_files(dir_or_list: PathBuf) -> PyResult<(Vec<String>, String)> {
+    let files = ponq_data::prep::mesh_inputs(&dir_or_list)
+        .map_err(|e| value_err(format!("listing {}: {e}", dir_or_list.display())))?;
+    let root = ponq_data::prep::input_root(&dir_or_list);
+    Ok((
+        files
+            .iter()
+            .map(|p| p.to_string_lossy().into_owned())
+            .collect(),
+        root.to_string_lossy().into_owned(),
+    ))
+}
+
+/// The output names ``prepare_meshes`` and ``ponq-prep meshes`` give ``meshes``: each one's
+/// path below ``root`` (default their deepest common folder) without its extension.
+///
+/// Raises:
+///     ValueError: two meshes that would share an output (they differ only by their
+///         extension or letter case, or one is listed twice).
+#[pyfunction]
+#[pyo3(signature = (meshes, *, root=None), text_signature = "(meshes, *, root=None)")]
+pub(crate) fn output_names(meshes: Vec<PathBuf>, root: Option<PathBuf>) -> PyResult<Vec<String>> {
+    let root = root.unwrap_or_else(|| ponq_data::names::common_folder(&meshes));
+    ponq_data::names::output_names(&meshes, &root).map_err(|e| value_err(e.to_string()))
 }

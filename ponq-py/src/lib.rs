@@ -57,6 +57,8 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(meshing::mesh, m)?)?;
     m.add_function(wrap_pyfunction!(data::sdf, m)?)?;
     m.add_function(wrap_pyfunction!(datasets::prepare_meshes, m)?)?;
+    m.add_function(wrap_pyfunction!(datasets::mesh_files, m)?)?;
+    m.add_function(wrap_pyfunction!(datasets::output_names, m)?)?;
     m.add_function(wrap_pyfunction!(data::sample, m)?)?;
     m.add_function(wrap_pyfunction!(data::fit, m)?)?;
     m.add_function(wrap_pyfunction!(evaluation::metrics, m)?)?;
@@ -73,6 +75,8 @@ fn ponq_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
             "mesh",
             "sdf",
             "prepare_meshes",
+            "mesh_files",
+            "output_names",
             "sample",
             "fit",
             "metrics",

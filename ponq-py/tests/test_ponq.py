@@ -582,6 +582,9 @@ def test_prepare_meshes_shapenet_layout(tmp_path):
         for i in range(3)
     ]
     assert sum(len(n) for n in names) == 3 and _npz_tree(sharded) == py
+    # Names depend on the root only: one mesh alone, with the dataset's root, keeps its name.
+    assert ponq.output_names(meshes[:1], root=str(d)) == ["a/model"]
+    assert ponq.mesh_files(d) == (meshes, str(d))
     # Two files that differ only by their extension: refused before any work.
     (d / "a" / "model.stl").write_bytes(b"solid x\nendsolid x\n")
     with pytest.raises(ValueError, match="would both be written"):
@@ -620,9 +623,9 @@ def test_ray_prepare_matches_ponq_prep(tmp_path):
     run([binary("ponq-prep"), "meshes", d, "-o", tmp_path / "cli", "--res", "16", "--samples", "2000", "-q"], code=2)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        meshes = ray_prepare.mesh_files(d)
+        meshes, root = ray_prepare.mesh_files(d)
         out = tmp_path / "ray"
-        recs = ray_prepare.prepare(meshes, out, shards=4, res=[16], samples=2000)
+        recs = ray_prepare.prepare(meshes, out, root=root, shards=4, res=[16], samples=2000)
         assert _npz_files(tmp_path / "cli") == _npz_files(out)
         assert len(_npz_files(out)) == 20
         errors = [r for r in recs if r["status"] == "error"]
@@ -631,12 +634,13 @@ def test_ray_prepare_matches_ponq_prep(tmp_path):
         # The logs beside the outputs hold the same records; a second run skips everything.
         logged = [json.loads(l) for f in sorted(out.glob("log-shard-*.jsonl")) for l in f.read_text().splitlines()]
         assert len(logged) == 21
-        again = ray_prepare.prepare(meshes, out, shards=4, res=[16], samples=2000)
+        again = ray_prepare.prepare(meshes, out, root=root, shards=4, res=[16], samples=2000)
         assert sorted(r["status"] for r in again) == ["already"] * 20 + ["error"]
         # A ShapeNet-style layout: one output per mesh, as ponq-prep writes them.
         sn = _shapenet(tmp_path)
         run([binary("ponq-prep"), "meshes", sn, "-o", tmp_path / "sn-cli", "--res", "8", "--samples", "2000", "-q"])
-        recs = ray_prepare.prepare(ray_prepare.mesh_files(sn), tmp_path / "sn-ray", shards=3, res=[8], samples=2000)
+        sn_files, sn_root = ray_prepare.mesh_files(sn)
+        recs = ray_prepare.prepare(sn_files, tmp_path / "sn-ray", root=sn_root, shards=3, res=[8], samples=2000)
         assert sorted(r["name"] for r in recs) == ["a/model", "b/model", "c/model"]
         assert _npz_tree(tmp_path / "sn-ray") == _npz_tree(tmp_path / "sn-cli")
         # The example's command line exits 2 when a shape failed, 0 when all are done.

@@ -13,7 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::normalize::Normalization;
 use ponq_data::prep::{
-    BatchRun, Job, PrepOptions, SynthJob, mesh_inputs, mesh_jobs, run_batch_with,
+    BatchRun, Job, PrepOptions, SynthJob, input_root, mesh_inputs, mesh_jobs, run_batch_with,
 };
 use ponq_data::records::RecordLog;
 use ponq_data::repair::{RepairOptions, repair_with_solid};
@@ -44,10 +44,10 @@ enum Command {
     /// one OUT/NAME.npz per mesh with `pointcloud`, `normals`, `<res>_sdf` and
     /// `<res>_occupancy` in the [-1,1] frame.
     ///
-    /// NAME is the mesh's file stem; meshes that share a stem (a/model.obj, b/model.obj) are
-    /// named by their folders below the input folder, as many as tell them apart
-    /// (OUT/a/model.npz, OUT/b/model.npz); two files that differ only by their extension are
-    /// refused before any work. Runs in parallel. Outputs are written whole or not at all
+    /// NAME is the mesh's path below the input folder (or the list's folder) without its
+    /// extension: a flat folder gives OUT/STEM.npz, a layout such as ShapeNet's
+    /// (a/model.obj, b/model.obj) OUT/a/model.npz, OUT/b/model.npz; two files that differ
+    /// only by their extension or letter case are refused before any work. Runs in parallel. Outputs are written whole or not at all
     /// (a temporary file, flushed to the disk, then renamed); shapes whose output is already
     /// in OUT, whole, are not redone (a killed run resumes; a cut file is redone). A bad mesh
     /// is an error record in the log and the others go on.
@@ -511,6 +511,11 @@ fn run_break(a: &BreakArgs) -> Result<()> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // A memory setting that cannot be read is an error before any work.
+    if let Err(e) = ponq_mesh::memory::budget() {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
     let result = match &cli.command {
         Command::Sdf(a) => run_sdf(a).map(|()| BatchOutcome::AllDone),
         Command::Meshes(a) => mesh_inputs(&a.input)
@@ -522,7 +527,7 @@ fn main() -> ExitCode {
                         a.input.display()
                     );
                 }
-                let jobs = mesh_jobs(files).context("naming the outputs")?;
+                let jobs = mesh_jobs(files, &input_root(&a.input)).context("naming the outputs")?;
                 run_batch_cmd(&jobs, &a.batch)
             }),
         Command::Break(a) => run_break(a).map(|()| BatchOutcome::AllDone),

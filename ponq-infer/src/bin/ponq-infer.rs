@@ -42,10 +42,10 @@ struct Args {
     /// (as `ponq-prep sdf` does); the output is then in the mesh's coordinates. A folder
     /// (searched recursively) or a `.txt` list of such files (one path per line, relative to
     /// the list) runs them all into the folder -o, one OUT/NAME.<--format> each (see
-    /// --shard, --log). NAME is the file stem; inputs that share a stem (a/model.obj,
-    /// b/model.obj) are named by their folders, as many as tell them apart (OUT/a/model.obj);
-    /// two inputs that differ only by their extension are refused before any work. Outputs
-    /// already in OUT, whole, are not redone (a killed run resumes).
+    /// --shard, --log). NAME is the input's path below the folder (or the list's folder)
+    /// without its extension (a/model.obj -> OUT/a/model.obj); two inputs that differ only by
+    /// their extension or letter case are refused before any work. Outputs already in OUT,
+    /// whole, are not redone (a killed run resumes).
     input: PathBuf,
     /// Output mesh (`.obj`, `.ply` or `.off`); with a folder or list as input, the output
     /// folder.
@@ -553,8 +553,9 @@ fn run_batch(args: &Args) -> Result<BatchCounts> {
             args.input.display()
         );
     }
-    // Distinct names (folders added where stems repeat), or a refusal before any work.
-    let names = ponq_data::names::output_names(&inputs).context("naming the outputs")?;
+    // Distinct names (paths below the input folder), or a refusal before any work.
+    let root = ponq_data::prep::input_root(&args.input);
+    let names = ponq_data::names::output_names(&inputs, &root).context("naming the outputs")?;
     let mine: Vec<(&PathBuf, &String)> = inputs
         .iter()
         .zip(&names)
@@ -581,8 +582,8 @@ fn run_batch(args: &Args) -> Result<BatchCounts> {
         let started = Instant::now();
         stale_removed += stale.remove_for(&output);
         // An output there counts as done only when whole (a run that crashed may have left
-        // a cut file under these rules' predecessors, or a full disk).
-        let cut = output.exists() && !ponq_data::outputs::is_whole(&output, args.open.is_none());
+        // a cut file under older versions, or a full disk).
+        let cut = output.exists() && !ponq_data::outputs::is_whole(&output);
         let record = if !cut && output.is_file() {
             counts.already += 1;
             Record::new(n, input, Status::Already)
@@ -651,6 +652,8 @@ fn run_batch(args: &Args) -> Result<BatchCounts> {
         record.shards = args.shard.map_or(1, |s| s.count());
         record.seconds = started.elapsed().as_secs_f64();
         log.write(&record).context("writing the log")?;
+        // The next shape's memory budget is measured afresh: give back what this one freed.
+        ponq_mesh::memory::release_freed();
         pb.inc(1);
     }
     pb.finish_and_clear();
@@ -696,6 +699,11 @@ fn main() -> ExitCode {
             .build_global()
     {
         eprintln!("error: cannot set the thread count: {e}");
+        return ExitCode::from(2);
+    }
+    // A memory setting that cannot be read is an error before any work.
+    if let Err(e) = ponq_mesh::memory::budget() {
+        eprintln!("error: {e}");
         return ExitCode::from(2);
     }
     if is_batch(&args.input) {

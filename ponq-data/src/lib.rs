@@ -20,6 +20,7 @@
 //! ```
 
 pub mod broken;
+pub mod condition;
 pub mod dataset;
 pub mod error;
 pub mod fit;

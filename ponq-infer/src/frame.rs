@@ -36,11 +36,18 @@ impl Frame {
 
     /// The frame of a grid of `d` nodes over `bounds` (the checks of [`Frame::of`] but the
     /// values').
+    ///
+    /// The default bounds `[-1,1]^3` with unequal node counts are taken as cubic cells: the
+    /// longest axis over `[-1, 1]`, the others centred on 0 ([`cubic_bounds`]).
     pub fn of_dims(d: [usize; 3], bounds: ([f64; 3], [f64; 3])) -> Result<Self> {
         if d.iter().any(|&x| x < 2) {
             bail!("the grid must have at least 2 nodes along every axis, it has {d:?}");
         }
-        let (lo, hi) = bounds;
+        let (lo, hi) = if bounds == ([-1.0; 3], [1.0; 3]) && !(d[0] == d[1] && d[1] == d[2]) {
+            cubic_bounds(d)
+        } else {
+            bounds
+        };
         let mut hs = [0.0; 3];
         for a in 0..3 {
             if !(hi[a] > lo[a]) || !lo[a].is_finite() || !hi[a].is_finite() {
@@ -78,6 +85,15 @@ impl Frame {
     pub fn is_identity(&self) -> bool {
         self.lo == [-1.0; 3] && (self.scale() - 1.0).abs() < 1e-15
     }
+}
+
+/// Bounds with cubic cells for a grid of `d` nodes: the longest axis over `[-1, 1]`, the
+/// others centred on 0 with the same spacing.
+pub fn cubic_bounds(d: [usize; 3]) -> ([f64; 3], [f64; 3]) {
+    let n = d.iter().max().copied().unwrap_or(2).max(2) - 1;
+    let h = 2.0 / n as f64;
+    let half = d.map(|x| x.saturating_sub(1) as f64 * h / 2.0);
+    (half.map(|x| -x), half)
 }
 
 /// Maps a PoNQ from the normalised frame to the user's: positions, and quadrics

@@ -9,6 +9,8 @@
 //! - [`reconstruct`]: prediction -> PoNQ (kept cells, PoNQ-lite / hierarchy) -> `ponq_mesh`
 //!   (Delaunay -> tags -> min cut -> mesh) -> refinement against the grid's exact distances
 //!   (`ponq_data::refine`, when the grid is a true signed distance) -> mesh;
+//! - [`grid_input`]: a grid file in, read near its surface, its values conditioned into
+//!   distances first (`ponq_data::condition`: units, sign, iso-level, monotone fields);
 //! - [`field`]: a signed distance function (a neural field) evaluated near its surface only;
 //! - [`mesh_input`]: a mesh as the input (normalised, its exact SDF grid computed);
 //! - [`shipped`]: the model in the repository's `models/` folder, also built into the program.
@@ -27,6 +29,7 @@
 
 pub mod field;
 pub mod frame;
+pub mod grid_input;
 pub mod mesh_input;
 pub mod reconstruct;
 pub mod shipped;

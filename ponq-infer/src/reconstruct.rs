@@ -12,6 +12,7 @@ use ponq_mesh::tagging::SmallTetRule;
 use ponq_mesh::{Ponq, TriMesh};
 use ponq_model::{PonqNet, network_input_scale};
 
+use ponq_data::condition::{ConditionOptions, Conditioning, FieldScan};
 use ponq_data::refine::{
     BAND_REACH, DistanceCheck, DistanceGrid, RefineOptions, check_distance, clear_balls, refine,
 };
@@ -58,6 +59,9 @@ pub struct InferOptions {
     pub refine: RefineMode,
     /// Parameters of the refinement.
     pub refine_options: RefineOptions,
+    /// How the grid's values are read (iso-level, sign, kind of field:
+    /// `ponq_data::condition`); by default measured.
+    pub condition: ConditionOptions,
 }
 
 /// When [`finish`] refines the network's PoNQ against the grid's distances
@@ -156,6 +160,7 @@ impl Default for InferOptions {
             authors_cell_base: false,
             refine: RefineMode::Auto,
             refine_options: RefineOptions::default(),
+            condition: ConditionOptions::default(),
         }
     }
 }
@@ -204,6 +209,8 @@ pub struct Inference {
     pub message: Option<String>,
     /// What the refinement did.
     pub refinement: RefineReport,
+    /// How the grid's values were read (when [`predict`] conditioned them).
+    pub conditioning: Option<Conditioning>,
 }
 
 /// The network's PoNQ on a grid, before any merging: what [`predict`] returns and
@@ -212,6 +219,9 @@ pub struct Inference {
 pub struct Predicted {
     /// The grid's frame.
     pub frame: Frame,
+    /// How the grid's values were read into distances (set by [`predict`] and
+    /// [`crate::grid_input`]; `None` from [`predict_band`] alone).
+    pub conditioning: Option<Conditioning>,
     /// The grid's values in the normalised frame (distances times [`Frame::scale`]), stored
     /// near the surface ([`band_parameters`]).
     pub normalised: BandGrid,
@@ -275,11 +285,14 @@ fn close_threshold(n: usize) -> f64 {
 }
 
 /// Runs the network on an SDF grid (negative inside) and returns its PoNQ over the kept
-/// cells ([`Predicted`]); [`infer`] is this followed by [`finish`].
+/// cells ([`Predicted`]); [`infer`] is this followed by [`finish`]. The values are read as
+/// `opts.condition` says (`ponq_data::condition`: a signed distance in the grid's frame is
+/// used as it is; other units, signs, levels and monotone functions of a distance are
+/// conditioned into one first).
 ///
 /// # Errors
-/// A grid that [`Frame::of`] rejects, an SDF without a sign change ("no sign change"), the
-/// network's errors.
+/// A grid that [`Frame::of`] rejects, a field without a sign change ("no sign change") or
+/// whose inside cannot be told, the network's errors.
 pub fn predict(
     net: &PonqNet,
     encoder_layers: usize,
@@ -289,10 +302,6 @@ pub fn predict(
     progress: impl FnMut(usize, usize),
 ) -> Result<Predicted> {
     let frame = Frame::of(grid, opts.bounds)?;
-    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
-    // Priced plane by plane as it is built (a grid whose surface fills it stores it all).
-    let mut b = ponq_mesh::band::BandBuilder::new(grid.dims, frame.scale(), t, reach)?
-        .with_limit(band_memory_limit()?);
     let plane = grid.dims[1] * grid.dims[2];
     if grid.data.len() != grid.dims.iter().product::<usize>() {
         bail!(
@@ -301,11 +310,36 @@ pub fn predict(
             grid.dims
         );
     }
+    // What the values are (a pass over the planes), then the band of the distances.
+    let mut scan = FieldScan::new(grid.dims, &opts.condition);
     for p in grid.data.chunks(plane.max(1)) {
-        b.push_plane(p)?;
+        scan.push_plane(p)?;
+    }
+    let conditioning = scan.finish(frame.scale())?;
+    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
+    // Priced plane by plane as it is built (a grid whose surface fills it stores it all).
+    let identity = conditioning.is_identity();
+    let mut b = ponq_mesh::band::BandBuilder::new(
+        grid.dims,
+        if identity { frame.scale() } else { 1.0 },
+        t,
+        reach,
+    )?
+    .with_limit(band_memory_limit()?);
+    let mut mapped = Vec::new();
+    for p in grid.data.chunks(plane.max(1)) {
+        if identity {
+            b.push_plane(p)?;
+        } else {
+            mapped.clear();
+            mapped.extend(p.iter().map(|&v| conditioning.apply(v)));
+            b.push_plane(&mapped)?;
+        }
     }
     let band = b.finish()?;
-    predict_band(net, encoder_layers, band, opts, device, progress)
+    let mut out = predict_band(net, encoder_layers, band, opts, device, progress)?;
+    out.conditioning = Some(conditioning);
+    Ok(out)
 }
 
 /// [`predict`] on a grid already stored near its surface, in the normalised frame (read with
@@ -401,6 +435,7 @@ pub fn predict_band(
         .collect();
     Ok(Predicted {
         frame,
+        conditioning: None,
         normalised: band,
         ponq,
         cells,
@@ -498,7 +533,20 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
         (Some(g), RefineMode::Auto) => {
             let c = check_distance(g);
             refinement.check = Some(c);
-            c.is_distance()
+            // Distances mapped from another field are a little off everywhere (the map's
+            // error), so some nodes look steeper than 1: the rest of the check still holds.
+            match p.conditioning.as_ref().and_then(|k| k.mapped_refinable()) {
+                Some(true) => c.steepest_median >= 0.92 && c.steepest_unit_fraction >= 0.6,
+                Some(false) => {
+                    refinement.note = Some(
+                        "the field's distances are mapped from its values, too loosely to \
+                         refine against"
+                            .into(),
+                    );
+                    false
+                }
+                None => c.is_distance(),
+            }
         }
         (Some(_), _) => true,
         (None, _) => false,
@@ -565,6 +613,7 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
         },
         tiles: p.tiles,
         kept_cells: p.kept_cells,
+        conditioning: p.conditioning.clone(),
         message,
         refinement,
     })

@@ -10,8 +10,7 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use ponq_data::records::{Record, RecordLog, Status};
 use ponq_infer::mesh_input::{MeshInput, mesh_band};
-use ponq_infer::reconstruct::band_parameters;
-use ponq_infer::{Frame, InferOptions, RefineMode, finish, predict_band, shipped};
+use ponq_infer::{InferOptions, RefineMode, finish, predict_band, shipped};
 use ponq_mesh::cli::MesherFlags;
 use ponq_mesh::mesher::MeshingOptions;
 use ponq_mesh::{io, validity};
@@ -22,8 +21,9 @@ use ponq_model::backend::{BackendKind, device};
 /// -> mesh.
 ///
 /// The output is closed, oriented, manifold and free of self-intersections (checked; exit
-/// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 empty
-/// surface (the SDF has no sign change; nothing is written). With a folder or list: 0 only
+/// code 3 if not). Exit codes: 0 success, 2 bad input or flags, 3 invalid output, 4 no
+/// surface (the field has no sign change at its level, or one but no surface came out;
+/// nothing is written). With a folder or list: 0 only
 /// when every input is written (valid) or already there, 2 when any failed (each failure
 /// printed and in the log), else 3 when an output failed the validity check.
 ///
@@ -66,6 +66,23 @@ struct Args {
     /// OUT/log-shard-I-of-N.jsonl]; `ponq-eval log` summarises logs.
     #[arg(long, value_name = "LOG.jsonl")]
     log: Option<PathBuf>,
+    /// Grid input: the iso-level of the surface [default: 0; a field whose values lie in
+    /// [0, 1] without a sign change at 0, an occupancy, is taken at 0.5 with a note].
+    #[arg(long, value_name = "L", allow_hyphen_values = true)]
+    level: Option<f64>,
+    /// Grid input: which side of the level is inside. auto: the side the grid's boundary
+    /// lies on is outside (a note when that flips the sign; an error when the boundary lies
+    /// on both sides); negative: signed distances as this project writes them; positive:
+    /// occupancies, densities, inside-positive SDFs.
+    #[arg(long, value_name = "SIDE", default_value = "auto")]
+    inside: ponq_data::condition::Inside,
+    /// Grid input: what the values are. auto: measured from the slopes at the surface, so
+    /// that a distance in other units (voxels, millimetres, a normalised TSDF) is rescaled and
+    /// a monotone function of a distance (occupancy, tanh, sigmoid) is mapped back to one,
+    /// while a true signed distance in the units of --bounds is used as it is; distance: take
+    /// the values as such distances without measuring.
+    #[arg(long, value_name = "KIND", default_value = "auto")]
+    field: ponq_data::condition::FieldKind,
     /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
     /// (the network's training resolution), 128 fine [default: 64].
     #[arg(long, value_name = "RES")]
@@ -236,6 +253,21 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     if mesh_input && args.mesher.bounds.is_some() {
         bail!("--bounds is for SDF grids: a mesh input is normalised into [-1,1]^3");
     }
+    if mesh_input
+        && (args.level.is_some()
+            || args.inside != ponq_data::condition::Inside::Auto
+            || args.field != ponq_data::condition::FieldKind::Auto)
+    {
+        bail!(
+            "--level, --inside and --field are for grids: a mesh input gives its own exact \
+             signed distance"
+        );
+    }
+    if let Some(l) = args.level
+        && !l.is_finite()
+    {
+        bail!("--level takes a finite number, got {l}");
+    }
     if !mesh_input
         && (args.res.is_some() || args.normalized || args.no_repair || args.json.is_some())
     {
@@ -289,9 +321,15 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             rounds: args.refine_rounds.map(usize::from),
             ..Default::default()
         },
+        condition: ponq_data::condition::ConditionOptions {
+            level: args.level,
+            inside: args.inside,
+            field: args.field,
+        },
         ..Default::default()
     };
     let t = Instant::now();
+    let mut conditioning = None;
     let (grid, normalization) = if mesh_input {
         let mesh = io::read_mesh(&args.input)
             .with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
@@ -337,28 +375,28 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     } else {
         let pb = bar(
             args.quiet,
-            "read {bar:30} {pos}/{len} planes [{elapsed} < {eta}]",
+            "{msg} {bar:30} {pos}/{len} planes [{elapsed} < {eta}]",
         );
-        let band = io::npy::read_npy_band(
+        let g = ponq_infer::grid_input::read_grid(
             &args.input,
-            |dims| {
-                let frame = Frame::of_dims(dims, bounds)
-                    .map_err(|e| ponq_mesh::Error::InvalidInput(format!("{e:#}")))?;
-                let (t, reach) = band_parameters(frame.n, net_cfg.encoder_layers, &opts);
-                // The band may take half of what is free; the rest is for the network and
-                // the meshing (checked again before the network runs).
-                let limit = ponq_infer::reconstruct::band_memory_limit()
-                    .map_err(|e| ponq_mesh::Error::InvalidInput(format!("{e:#}")))?;
-                Ok((frame.scale(), t, reach, limit))
-            },
-            |done, total| {
+            net_cfg.encoder_layers,
+            &opts,
+            |stage, done, total| {
+                pb.set_message(stage.to_string());
                 pb.set_length(total as u64);
                 pb.set_position(done as u64);
             },
-        )
-        .with_context(|| format!("cannot read the SDF grid {}", args.input.display()))?;
+        );
         pb.finish_and_clear();
-        (band, None)
+        let g = match g {
+            Err(e) if format!("{e:#}").contains("no sign change") => {
+                eprintln!("error: {e:#}");
+                return Ok(Outcome::Empty);
+            }
+            g => g?,
+        };
+        conditioning = Some(g.conditioning);
+        (g.band, None)
     };
     let read_time = t.elapsed();
     if (args.lite || args.coarsen > 0) && args.refine == RefineMode::On {
@@ -372,7 +410,10 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     };
     let predicted = predict_band(&net, net_cfg.encoder_layers, grid, &opts, &dev, tick);
     let predicted = match predicted {
-        Ok(r) => r,
+        Ok(mut r) => {
+            r.conditioning = conditioning.clone();
+            r
+        }
         Err(e) if e.to_string().contains("no sign change") => {
             pb.finish_and_clear();
             eprintln!("error: {e:#}");
@@ -397,6 +438,21 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     drop(predicted);
     sp.finish_and_clear();
     let mut res = res?;
+    if res.mesh.faces.is_empty() {
+        // The field has a sign change, yet nothing came out: never a silent empty file.
+        eprintln!(
+            "error: the grid has a sign change but no surface came out ({}); nothing is \
+             written. Check how its values are read{}: --level (the iso-level), --inside \
+             (which side is inside), --field distance (take the values as distances); or mesh \
+             a finer grid",
+            res.message.as_deref().unwrap_or("the network kept no cell"),
+            conditioning
+                .as_ref()
+                .map(|c: &ponq_data::condition::Conditioning| format!(" ({})", c.summary()))
+                .unwrap_or_default()
+        );
+        return Ok(Outcome::Empty);
+    }
     if let Some(norm) = &normalization
         && !args.normalized
     {
@@ -454,6 +510,9 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             res.mesh.vertices.len(),
             res.mesh.faces.len()
         );
+        if let Some(c) = &conditioning {
+            println!("{}", c.summary());
+        }
         if let Some(m) = &res.message {
             println!("note: {m}");
         }
@@ -611,7 +670,11 @@ fn run_batch(args: &Args) -> Result<BatchCounts> {
                 Ok(Outcome::Valid | Outcome::Invalid) => Record::new(n, input, Status::Done),
                 Ok(Outcome::Empty) => {
                     let mut r = Record::new(n, input, Status::Error);
-                    r.error = Some("the SDF has no sign change: the surface is empty".into());
+                    r.error = Some(
+                        "no surface: the field has no sign change at its level, or none came \
+                         out (see --level, --inside, --field)"
+                            .into(),
+                    );
                     r
                 }
                 Err(e) => {

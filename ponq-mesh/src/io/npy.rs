@@ -107,6 +107,9 @@ pub fn read_npy_grid(path: impl AsRef<Path>) -> Result<Grid3> {
     Ok(Grid3 { dims, data: a.data })
 }
 
+/// A value map applied to every value of a grid as it is read ([`read_npy_band_mapped`]).
+pub type ValueMap<'a> = &'a (dyn Fn(f64) -> f64 + Sync);
+
 /// Reads a rank-3 float32 or float64 `.npy` grid (C or Fortran order) into a
 /// [`BandGrid`] plane by plane, never holding more than a few planes of the whole grid.
 /// `band(dims)` gives, from the grid's node counts, the scale applied to every value, the
@@ -119,8 +122,77 @@ pub fn read_npy_grid(path: impl AsRef<Path>) -> Result<Grid3> {
 pub fn read_npy_band(
     path: impl AsRef<Path>,
     band: impl FnOnce([usize; 3]) -> Result<(f64, f64, usize, Option<usize>)>,
+    progress: impl FnMut(usize, usize),
+) -> Result<BandGrid> {
+    read_npy_band_mapped(path, band, None, progress)
+}
+
+/// [`read_npy_band`] with every value passed through `map` before it is scaled (a field
+/// conditioned into a signed distance as it is read).
+///
+/// # Errors
+/// As [`read_npy_band`]; a value the map makes non-finite.
+pub fn read_npy_band_mapped(
+    path: impl AsRef<Path>,
+    band: impl FnOnce([usize; 3]) -> Result<(f64, f64, usize, Option<usize>)>,
+    map: Option<ValueMap<'_>>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<BandGrid> {
+    let path = path.as_ref();
+    let mut b: Option<BandBuilder> = None;
+    let mut band = Some(band);
+    let (_, fortran) = for_each_npy_plane(path, |stored, info_fortran, p, values| {
+        if b.is_none() {
+            let dims = if info_fortran {
+                [stored[2], stored[1], stored[0]]
+            } else {
+                stored
+            };
+            let f = band
+                .take()
+                .ok_or_else(|| Error::InvalidInput("band read twice".into()))?;
+            let (scale, threshold, reach, limit) = f(dims)?;
+            b = Some(BandBuilder::new(stored, scale, threshold, reach)?.with_limit(limit));
+        }
+        let builder = b
+            .as_mut()
+            .ok_or_else(|| Error::InvalidInput("no band builder".into()))?;
+        let mapped;
+        let values = match map {
+            Some(m) => {
+                mapped = values.iter().map(|&v| m(v)).collect::<Vec<f64>>();
+                &mapped
+            }
+            None => values,
+        };
+        builder.push_plane(values).map_err(|e| match e {
+            Error::InvalidInput(m) if info_fortran => {
+                Error::format(path, format!("{m} (of the reversed axes: Fortran order)"))
+            }
+            Error::InvalidInput(m) => Error::format(path, m),
+            e => e,
+        })?;
+        progress(p + 1, stored[0]);
+        Ok(())
+    })?;
+    let g = b
+        .ok_or_else(|| Error::format(path, "a grid without planes"))?
+        .finish()?;
+    Ok(if fortran { g.reversed() } else { g })
+}
+
+/// Calls `f(stored_dims, fortran, index, plane)` for every plane of a rank-3 float32 or
+/// float64 `.npy` grid, in the file's order: a C-order file's planes along its first axis, a
+/// Fortran-order file's along its last (`stored_dims` are then the reversed axes). Returns the
+/// grid's dims (in C order) and whether the file is in Fortran order. Holds one plane at a
+/// time.
+///
+/// # Errors
+/// As [`read_npy_grid`] (a file that is not a rank-3 float grid, a cut file); `f`'s errors.
+pub fn for_each_npy_plane(
+    path: impl AsRef<Path>,
+    mut f: impl FnMut([usize; 3], bool, usize, &[f64]) -> Result<()>,
+) -> Result<([usize; 3], bool)> {
     let path = path.as_ref();
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let len = match file.metadata() {
@@ -139,30 +211,19 @@ pub fn read_npy_band(
         ));
     }
     let dims = [shape[0], shape[1], shape[2]];
-    let (scale, threshold, reach, limit) = band(dims)?;
-    // A Fortran-order file holds the planes of the last axis: read it as the reversed grid.
     let stored = if info.fortran {
         [dims[2], dims[1], dims[0]]
     } else {
         dims
     };
     let big = is_big_endian(&info.descr);
-    let mut b = BandBuilder::new(stored, scale, threshold, reach)?.with_limit(limit);
     let plane = stored[1] * stored[2];
     for p in 0..stored[0] {
         let values = read_values(&mut r, plane, size, big)
             .map_err(|m| Error::format(path, format!("plane {p} of {}: {m}", stored[0])))?;
-        b.push_plane(&values).map_err(|e| match e {
-            Error::InvalidInput(m) if info.fortran => {
-                Error::format(path, format!("{m} (of the reversed axes: Fortran order)"))
-            }
-            Error::InvalidInput(m) => Error::format(path, m),
-            e => e,
-        })?;
-        progress(p + 1, stored[0]);
+        f(stored, info.fortran, p, &values)?;
     }
-    let g = b.finish()?;
-    Ok(if info.fortran { g.reversed() } else { g })
+    Ok((dims, info.fortran))
 }
 
 /// Writes `grid` to `path` as a C-order `float32` `.npy` file of shape `dims`.

@@ -13,7 +13,7 @@
 //! use ponq_data::outputs::{commit, partial_path};
 //! let out = Path::new("out/a/model.npz");
 //! let tmp = partial_path(out);
-//! std::fs::write(&tmp, b"...")?;
+//! std::fs::write(&tmp, b"...").map_err(|e| ponq_mesh::Error::io(&tmp, e))?;
 //! commit(&tmp, out)?;
 //! # Ok::<(), ponq_data::DataError>(())
 //! ```

@@ -54,6 +54,8 @@ pub struct FieldScan {
     max: f64,
     n_min: u64,
     n_max: u64,
+    /// Values within 0.05 of 0 or of 1 (a saturated occupancy has most of them).
+    near_0_or_1: u64,
     planes: usize,
     whole: Option<Vec<f32>>,
     open: Vec<Open>,
@@ -81,6 +83,7 @@ impl FieldScan {
             max: f64::NEG_INFINITY,
             n_min: 0,
             n_max: 0,
+            near_0_or_1: 0,
             planes: 0,
             whole: (nodes <= WHOLE_NODES).then(|| Vec::with_capacity(nodes)),
             open: Vec::new(),
@@ -127,6 +130,9 @@ impl FieldScan {
             }
             if v == self.max {
                 self.n_max += 1;
+            }
+            if v.abs() <= 0.05 || (v - 1.0).abs() <= 0.05 {
+                self.near_0_or_1 += 1;
             }
         }
         // The boundary: whole first and last planes, the border rows and columns of the others.
@@ -248,10 +254,15 @@ impl FieldScan {
                 )));
             }
             None if crosses(0.0) => (0.0, 0),
-            None if self.min >= 0.0 && self.max <= 1.0 && crosses(0.5) => {
+            // An occupancy: values in [0, 1], most of them saturated near 0 or 1.
+            None if self.min >= 0.0
+                && self.max <= 1.0
+                && crosses(0.5)
+                && self.near_0_or_1 * 2 >= self.dims.iter().product::<usize>() as u64 =>
+            {
                 notes.push(
-                    "its values lie in [0, 1] without a sign change at 0: meshed at level 0.5 \
-                     (an occupancy; --level sets another)"
+                    "its values lie in [0, 1], most of them near 0 or 1, without a sign change \
+                     at 0: meshed at level 0.5 (an occupancy; --level sets another)"
                         .to_string(),
                 );
                 (0.5, 1)

@@ -28,8 +28,8 @@ fn main() {
     if args.get(4).is_some_and(|f| f == "tanh") {
         pair_errors(&p, h);
     }
-    if let Some((m, e)) = fit_monotone(&p, (f64::NAN, f64::NAN)) {
-        println!("monotone error {:.4} cells", e / h);
+    if let Some((m, e)) = fit_monotone(&p, (f64::NAN, f64::NAN), h) {
+        println!("monotone error {:.4} cells, power {}", e / h, m.power());
         let mapped: Vec<f64> = u.iter().map(|&x| m.eval(x)).collect();
         let z2 = crossings(&mapped, &u, g.dims, h);
         let p2 = pairs(&u, &u, g.dims, h, &z2, 6.0, 1, |_| false);

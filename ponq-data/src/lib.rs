@@ -21,6 +21,7 @@
 
 pub mod broken;
 pub mod condition;
+pub mod conventions;
 pub mod dataset;
 pub mod error;
 pub mod fit;

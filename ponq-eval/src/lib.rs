@@ -41,6 +41,7 @@
 pub mod broken;
 pub mod chart;
 pub mod evaluate;
+pub mod fields;
 pub mod inputs;
 pub mod logs;
 pub mod render;

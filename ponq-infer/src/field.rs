@@ -9,8 +9,17 @@
 //! 8^3 nodes, and the bricks near the surface (and `reach` around them) are evaluated at every
 //! node. For a field with that Lipschitz bound the stored values are the dense grid's, so the
 //! mesh is the dense grid's.
+//!
+//! The field need not be a distance: its values are conditioned first, as a grid's are
+//! (`ponq_data::condition`), from its first evaluations: a probe grid of at most 33^3 nodes
+//! gives the iso-level and the sign, and windows of nodes at the full resolution around the
+//! probe's zero set give the kind of field (a distance in other units, a monotone function of
+//! one). The octree then tests the conditioned values, and the slopes seen in the evaluated
+//! bricks check the Lipschitz bound: where they exceed it, the bound is widened and the field
+//! evaluated again, rather than a piece dropped.
 
 use anyhow::{Result, bail};
+use ponq_data::condition::{Conditioning, FieldKind, FieldScan, Window, classify};
 use ponq_mesh::band::{BRICK, BandGrid};
 
 use crate::frame::Frame;
@@ -29,18 +38,42 @@ pub struct FieldStats {
     pub stored_bricks: usize,
 }
 
-/// The band of a field `eval` (signed distances in the units of `opts.bounds`, negative
-/// inside; called with batches of at most `batch` points, returns one value per point) on a
-/// grid of `res` cells per side over `opts.bounds` (node `(i, j, k)` at `lo + h (i, j, k)`,
-/// `h = (hi - lo) / res`), as [`crate::predict_band`] reads it for `encoder_layers`;
-/// `lipschitz` bounds how fast the field changes (1 for a true distance; more for a neural
-/// field that is not quite one). `progress(points_done)` after each batch.
+/// A field's band, how its values were conditioned, and the Lipschitz bound the octree used
+/// in the end.
+pub struct FieldBand {
+    /// The conditioned values near the surface, in the normalised frame.
+    pub band: BandGrid,
+    /// What was evaluated (all passes).
+    pub stats: FieldStats,
+    /// How the values were read into distances.
+    pub conditioning: Conditioning,
+    /// The Lipschitz bound of the last pass (the one given, or wider: slopes seen beyond it).
+    pub lipschitz: f64,
+}
+
+/// Cells per side of the probe grid that finds a field's level, sign and surface.
+const PROBE: usize = 32;
+/// Side, in nodes, of the windows evaluated at the full resolution for the conditioning.
+const PROBE_WINDOW: usize = 24;
+/// Windows at most.
+const PROBE_WINDOWS: usize = 8;
+/// Passes of the octree at most (each widens the Lipschitz bound the slopes exceeded).
+const MAX_PASSES: usize = 4;
+
+/// The band of a field `eval` (values in the units of `opts.bounds`; called with batches of
+/// at most `batch` points, returns one value per point) on a grid of `res` cells per side over
+/// `opts.bounds` (node `(i, j, k)` at `lo + h (i, j, k)`, `h = (hi - lo) / res`), as
+/// [`crate::predict_band`] reads it for `encoder_layers`. The values are conditioned as
+/// `opts.condition` says ([module docs](self)); `lipschitz` bounds how fast the conditioned
+/// field changes (1 for a true distance), and is widened where evaluated bricks show faster
+/// slopes. `progress(points_done)` after each batch.
 ///
 /// # Errors
 /// Bounds that do not make cubic cells, `res` below 1, a batch of 0, a `lipschitz` that is
-/// not positive, `eval`'s errors, a result of the wrong length or with a non-finite value.
+/// not positive, `eval`'s errors, a result of the wrong length or with a non-finite value, a
+/// field without a sign change or whose inside cannot be told.
 #[allow(clippy::too_many_arguments)]
-pub fn field_band(
+pub fn field_band_conditioned(
     res: usize,
     encoder_layers: usize,
     opts: &InferOptions,
@@ -48,27 +81,17 @@ pub fn field_band(
     batch: usize,
     mut eval: impl FnMut(&[[f64; 3]]) -> Result<Vec<f64>>,
     mut progress: impl FnMut(usize),
-) -> Result<(BandGrid, FieldStats)> {
+) -> Result<FieldBand> {
     if res == 0 || batch == 0 {
         bail!("a field needs at least 1 cell per side and a batch of at least 1 point");
     }
     if !(lipschitz > 0.0 && lipschitz.is_finite()) {
         bail!("lipschitz must be positive and finite, got {lipschitz}");
     }
+    let started = std::time::Instant::now();
     let n1 = res + 1;
-    let dims = [n1; 3];
-    let frame = Frame::of_dims(dims, opts.bounds)?;
-    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
-    let s = frame.scale();
-    let (lo, _) = opts.bounds;
-    let h: [f64; 3] = std::array::from_fn(|a| (opts.bounds.1[a] - lo[a]) / res as f64);
-    let node = |i: usize, j: usize, k: usize| {
-        [
-            lo[0] + h[0] * i as f64,
-            lo[1] + h[1] * j as f64,
-            lo[2] + h[2] * k as f64,
-        ]
-    };
+    let frame = Frame::of_dims([n1; 3], opts.bounds)?;
+    let (lo, hi) = opts.bounds;
     let mut stats = FieldStats {
         dense_points: n1 * n1 * n1,
         ..Default::default()
@@ -94,6 +117,143 @@ pub fn field_band(
         }
         Ok(out)
     };
+    // 1. The probe: level, sign, where the surface is.
+    let pr = res.min(PROBE);
+    let pn = pr + 1;
+    let probe_at = |i: usize| -> [f64; 3] {
+        let idx = [i / (pn * pn), (i / pn) % pn, i % pn];
+        std::array::from_fn(|a| lo[a] + (hi[a] - lo[a]) * idx[a] as f64 / pr as f64)
+    };
+    let probe_pts: Vec<[f64; 3]> = (0..pn * pn * pn).map(probe_at).collect();
+    let probe = call(&probe_pts, &mut stats)?;
+    let mut scan = FieldScan::new([pn; 3], &opts.condition);
+    for plane in probe.chunks(pn * pn) {
+        scan.push_plane(plane)?;
+    }
+    let (level, flip, notes) = scan.level_and_sign()?;
+    let mut c = Conditioning::identity(frame.scale());
+    c.level = level;
+    c.flip = flip;
+    c.notes = notes;
+    c.cells = frame.n;
+    if opts.condition.field != FieldKind::Distance {
+        // 2. Windows at the full resolution around the probe's zero set, spread by a hash.
+        let h: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]) / res as f64);
+        let below = |v: f64| (v < level) != flip;
+        let mut centres: Vec<(u64, [usize; 3])> = Vec::new();
+        for i in 0..pr {
+            for j in 0..pr {
+                for k in 0..pr {
+                    let at = |a: usize, b: usize, cc: usize| probe[(a * pn + b) * pn + cc];
+                    let s0 = below(at(i, j, k));
+                    if s0 == below(at(i + 1, j, k))
+                        && s0 == below(at(i, j + 1, k))
+                        && s0 == below(at(i, j, k + 1))
+                    {
+                        continue;
+                    }
+                    let centre = [i, j, k].map(|x| ((x as f64 + 0.5) * res as f64 / pr as f64) as usize);
+                    let key = (i as u64)
+                        .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                        .wrapping_add((j as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f))
+                        .wrapping_add((k as u64).wrapping_mul(0x1656_67b1_9e37_79f9))
+                        .rotate_left(17);
+                    centres.push((key, centre));
+                }
+            }
+        }
+        centres.sort_unstable();
+        let w = PROBE_WINDOW.min(n1);
+        let mut windows = Vec::new();
+        for (_, centre) in centres.into_iter().take(PROBE_WINDOWS) {
+            let origin = centre.map(|x| x.saturating_sub(w / 2).min(n1 - w));
+            let pts: Vec<[f64; 3]> = (0..w * w * w)
+                .map(|f| {
+                    let idx = [f / (w * w), (f / w) % w, f % w];
+                    std::array::from_fn(|a| lo[a] + h[a] * (origin[a] + idx[a]) as f64)
+                })
+                .collect();
+            let v = call(&pts, &mut stats)?;
+            windows.push(Window {
+                dims: [w; 3],
+                data: v.iter().map(|&x| x as f32).collect(),
+            });
+        }
+        classify(&mut c, &windows, &scan.value_range());
+    }
+    c.time = started.elapsed();
+    // 3. The octree on the conditioned values, widened while the slopes exceed its bound.
+    let mut bound = lipschitz;
+    for pass in 0..MAX_PASSES {
+        let (band, seen) = octree_band(
+            res,
+            encoder_layers,
+            opts,
+            bound,
+            batch,
+            &|v| c.apply(v),
+            &mut |pts, st| call(pts, st),
+            &mut stats,
+        )?;
+        if seen <= bound * 1.5 || pass + 1 == MAX_PASSES {
+            return Ok(FieldBand {
+                band,
+                stats,
+                conditioning: c,
+                lipschitz: bound,
+            });
+        }
+        bound = seen * 1.25;
+    }
+    unreachable!("the loop returns on its last pass")
+}
+
+/// [`field_band_conditioned`]'s band and statistics.
+///
+/// # Errors
+/// As [`field_band_conditioned`].
+#[allow(clippy::too_many_arguments)]
+pub fn field_band(
+    res: usize,
+    encoder_layers: usize,
+    opts: &InferOptions,
+    lipschitz: f64,
+    batch: usize,
+    eval: impl FnMut(&[[f64; 3]]) -> Result<Vec<f64>>,
+    progress: impl FnMut(usize),
+) -> Result<(BandGrid, FieldStats)> {
+    let b = field_band_conditioned(res, encoder_layers, opts, lipschitz, batch, eval, progress)?;
+    Ok((b.band, b.stats))
+}
+
+/// One pass of the octree over the field's conditioned values (`map` of the raw values):
+/// the band, and the steepest slope seen between neighbouring nodes of the evaluated bricks
+/// whose values are within 4 cells of the surface (normalised units per normalised length).
+#[allow(clippy::type_complexity)]
+fn octree_band(
+    res: usize,
+    encoder_layers: usize,
+    opts: &InferOptions,
+    lipschitz: f64,
+    batch: usize,
+    map: &dyn Fn(f64) -> f64,
+    call: &mut dyn FnMut(&[[f64; 3]], &mut FieldStats) -> Result<Vec<f64>>,
+    stats: &mut FieldStats,
+) -> Result<(BandGrid, f64)> {
+    let n1 = res + 1;
+    let dims = [n1; 3];
+    let frame = Frame::of_dims(dims, opts.bounds)?;
+    let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
+    let s = frame.scale();
+    let (lo, _) = opts.bounds;
+    let h: [f64; 3] = std::array::from_fn(|a| (opts.bounds.1[a] - lo[a]) / res as f64);
+    let node = |i: usize, j: usize, k: usize| {
+        [
+            lo[0] + h[0] * i as f64,
+            lo[1] + h[1] * j as f64,
+            lo[2] + h[2] * k as f64,
+        ]
+    };
     let nb = BandGrid::brick_dims_of(dims)[0];
     // Octree over bricks: blocks of `size` bricks per side, from the coarsest that covers the
     // grid in a few blocks down to one brick.
@@ -112,7 +272,6 @@ pub fn field_band(
         }
     }
     let mut near_bricks: Vec<[usize; 3]> = Vec::new();
-    let t_user = t / s;
     loop {
         // The node box of each block and its centre.
         let boxes: Vec<([usize; 3], [usize; 3])> = blocks
@@ -131,7 +290,7 @@ pub fn field_band(
                 std::array::from_fn(|k| 0.5 * (a[k] + b[k]))
             })
             .collect();
-        let values = call(&centres, &mut stats)?;
+        let values: Vec<f64> = call(&centres, stats)?.into_iter().map(map).collect();
         let mut next = Vec::new();
         for ((b, (l, u)), v) in blocks.iter().zip(&boxes).zip(values) {
             let a = node(l[0], l[1], l[2]);
@@ -141,7 +300,8 @@ pub fn field_band(
                     .map(|k| (c[k] - a[k]) * (c[k] - a[k]))
                     .sum::<f64>()
                     .sqrt();
-            if v.abs() > (lipschitz * r + t_user) * (1.0 + 1e-9) {
+            // In the normalised frame: the conditioned value against the bound over the block.
+            if v.abs() > (lipschitz * r * s + t) * (1.0 + 1e-9) {
                 far_blocks.push((*b, size, v < 0.0));
             } else if size == 1 {
                 near_bricks.push(*b);
@@ -192,7 +352,7 @@ pub fn field_band(
         }
     }
     let list: Vec<usize> = (0..stored.len()).filter(|&b| stored[b]).collect();
-    stats.stored_bricks = list.len();
+    let list_len = list.len();
     let b3 = BRICK * BRICK * BRICK;
     // Priced before the field runs on them: the bricks' values, held twice while the band
     // is assembled.
@@ -224,15 +384,42 @@ pub fn field_band(
                 }
             }
         }
-        let values = call(&pts, &mut stats)?;
+        let values = call(&pts, stats)?;
         let mut block = vec![0.0; group.len() * b3];
         for (slot, v) in slots.into_iter().zip(values) {
-            block[slot] = v * s;
+            block[slot] = map(v);
         }
         for (g, &b) in group.iter().enumerate() {
             bricks.push((b, block[g * b3..(g + 1) * b3].to_vec()));
         }
     }
+    // The steepest slope between neighbours of the evaluated bricks near the surface.
+    let cell = 2.0 / frame.n as f64;
+    let near = 4.0 * cell;
+    let mut seen = 0.0f64;
+    for (b, v) in &bricks {
+        let base = [b / (nb * nb), (b / nb) % nb, b % nb].map(|c| c * BRICK);
+        // Nodes of the brick inside the grid (the rest is padding).
+        let lim = base.map(|c| (n1 - c).min(BRICK));
+        for x in 0..lim[0] {
+            for y in 0..lim[1] {
+                for z in 0..lim[2] {
+                    let a = v[(x * BRICK + y) * BRICK + z];
+                    for (dx, dy, dz) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
+                        let (x2, y2, z2) = (x + dx, y + dy, z + dz);
+                        if x2 >= lim[0] || y2 >= lim[1] || z2 >= lim[2] {
+                            continue;
+                        }
+                        let b = v[(x2 * BRICK + y2) * BRICK + z2];
+                        if a.abs() < near || b.abs() < near {
+                            seen = seen.max((a - b).abs() / cell);
+                        }
+                    }
+                }
+            }
+        }
+    }
     let grid = BandGrid::from_bricks(dims, t, reach, bricks, |b| negative[b])?;
-    Ok((grid, stats))
+    stats.stored_bricks = list_len;
+    Ok((grid, seen))
 }

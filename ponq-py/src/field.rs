@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use numpy::{PyArray2, PyArrayMethods};
-use ponq_infer::field::field_band;
+use ponq_infer::field::field_band_conditioned;
 use ponq_infer::{finish, predict_band};
 use ponq_mesh::validity;
 use pyo3::prelude::*;
@@ -12,8 +12,8 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::arrays::{mesh_out, tuple};
 use crate::errors::{Failure, run, value_err, warn};
-use crate::inference::network;
-use crate::options::{infer_options, warn_invalid};
+use crate::inference::{network, warn_conditioning};
+use crate::options::{condition_options, infer_options, warn_invalid};
 
 /// Reconstructs a mesh from a signed distance *function* with the PoNQ network, evaluating
 /// it only where the surface can be: the grid of ``res`` cells per side over ``bounds`` is
@@ -24,6 +24,12 @@ use crate::options::{infer_options, warn_invalid};
 /// points. For a field that changes no faster than ``lipschitz`` (1 for a true
 /// distance) the mesh is the dense grid's, bit for bit.
 ///
+/// The field need not be a distance: as ``ponq.infer`` reads a grid, its values are read into
+/// distances first (``level``, ``inside``, ``field``), measured from its first evaluations (a
+/// probe grid of at most 33^3 points, then windows at the full resolution around the surface).
+/// Where the evaluated bricks show the conditioned field changing faster than ``lipschitz``,
+/// the bound is widened and the field evaluated again (``stats["lipschitz"]``).
+///
 /// Args:
 ///     f: a callable taking a float64 array (N, 3) of points and returning N signed
 ///         distances (negative inside; any array-like, e.g. a NumPy array). For a PyTorch
@@ -32,15 +38,18 @@ use crate::options::{infer_options, warn_invalid};
 ///         ``h = (hi - lo) / res``).
 ///     bounds: the box of the grid, 6 floats ``(xmin, ymin, zmin, xmax, ymax, zmax)``; a cube
 ///         (the cells must be cubes); default ``[-1, 1]^3``.
-///     lipschitz: how fast the field may change (distance per unit length); raise it for a
-///         neural field that is not quite a distance (more points are evaluated).
+///     level, inside, field: how the values are read, as in ``ponq.infer``.
+///     lipschitz: how fast the conditioned field may change (distance per unit length); raise
+///         it for a neural field that is not quite a distance (more points are evaluated); it
+///         is widened where the evaluated bricks show faster slopes.
 ///     batch: the most points per call of ``f``.
 ///     model, lite, coarsen, merge_smooth, refine, threads, check: as in ``ponq.infer``.
 ///
 /// Returns:
 ///     ``(vertices, faces, stats)``: the mesh as ``ponq.infer`` returns it, and a dict with
 ///     ``calls`` (calls of ``f``), ``points`` (points evaluated), ``dense_points`` (the
-///     grid's nodes) and ``stored_bricks``.
+///     grid's nodes), ``stored_bricks``, ``lipschitz`` (the bound the last pass used) and
+///     ``field`` (how the values were read, a line).
 ///
 /// Raises:
 ///     ValueError: bad options, a field without a sign change, ``f`` returning the wrong
@@ -48,8 +57,8 @@ use crate::options::{infer_options, warn_invalid};
 ///     Any exception ``f`` raises.
 #[pyfunction]
 #[pyo3(
-    signature = (f, res, *, bounds=None, lipschitz=1.0, batch=65536, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), refine="auto", threads=None, check=true),
-    text_signature = "(f, res, *, bounds=None, lipschitz=1.0, batch=65536, model=None, lite=False, coarsen=0, merge_smooth=15.0, refine='auto', threads=None, check=True)"
+    signature = (f, res, *, bounds=None, level=None, inside="auto", field="auto", lipschitz=1.0, batch=65536, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), refine="auto", threads=None, check=true),
+    text_signature = "(f, res, *, bounds=None, level=None, inside='auto', field='auto', lipschitz=1.0, batch=65536, model=None, lite=False, coarsen=0, merge_smooth=15.0, refine='auto', threads=None, check=True)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn infer_field<'py>(
@@ -57,6 +66,9 @@ pub(crate) fn infer_field<'py>(
     f: &Bound<'py, PyAny>,
     res: usize,
     bounds: Option<Vec<f64>>,
+    level: Option<f64>,
+    inside: &str,
+    field: &str,
     lipschitz: f64,
     batch: usize,
     model: Option<PathBuf>,
@@ -78,14 +90,15 @@ pub(crate) fn infer_field<'py>(
             "f must be a callable: points (N, 3) -> distances (N,)",
         ));
     }
-    let opts = infer_options(bounds, lite, coarsen, merge_smooth, None, refine)?;
+    let condition = condition_options(level, inside, field)?;
+    let opts = infer_options(bounds, lite, coarsen, merge_smooth, None, refine, condition)?;
     let dev = ponq_model::backend::cpu();
     let (net, cfg) = network(model.as_deref(), &dev)
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("{e:#}")))?;
     // The field is Python: the band is built holding the interpreter.
     let np = py.import("numpy")?;
     let mut py_error: Option<PyErr> = None;
-    let built = field_band(
+    let built = field_band_conditioned(
         res,
         cfg.encoder_layers,
         &opts,
@@ -110,7 +123,7 @@ pub(crate) fn infer_field<'py>(
         },
         |_| {},
     );
-    let (band, stats) = match built {
+    let built = match built {
         Ok(x) => x,
         Err(e) => {
             return Err(match py_error {
@@ -119,8 +132,15 @@ pub(crate) fn infer_field<'py>(
             });
         }
     };
+    let (band, stats, conditioning, bound) = (
+        built.band,
+        built.stats,
+        built.conditioning,
+        built.lipschitz,
+    );
+    let summary = conditioning.summary();
     let (res_, report) = run(py, threads, move || {
-        let p =
+        let mut p =
             predict_band(&net, cfg.encoder_layers, band, &opts, &dev, |_, _| {}).map_err(|e| {
                 if e.to_string().contains("no sign change") {
                     Failure::Value(format!("{e:#}"))
@@ -128,10 +148,12 @@ pub(crate) fn infer_field<'py>(
                     Failure::from(e)
                 }
             })?;
+        p.conditioning = Some(conditioning);
         let res = finish(&p, &opts)?;
         let report = (check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
         Ok((res, report))
     })?;
+    warn_conditioning(py, res_.conditioning.as_ref())?;
     if let Some(m) = &res_.message {
         warn(py, "UserWarning", m)?;
     }
@@ -142,6 +164,8 @@ pub(crate) fn infer_field<'py>(
     d.set_item("points", stats.points)?;
     d.set_item("dense_points", stats.dense_points)?;
     d.set_item("stored_bricks", stats.stored_bricks)?;
+    d.set_item("lipschitz", bound)?;
+    d.set_item("field", summary)?;
     out.push(d.into_any());
     tuple(py, out)
 }

@@ -12,8 +12,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
 use crate::arrays::{grid3, mesh_out, ponq_out, tuple};
-use crate::errors::{Failure, bad, run, value_err, warn};
-use crate::options::{check_open, infer_options, open_arg, warn_invalid};
+use crate::errors::{Failure, run, value_err, warn};
+use crate::options::{check_open, condition_options, infer_options, open_arg, warn_invalid};
 
 /// The network of `model` (a `.bpk` file) or the shipped one, loaded once and kept.
 pub(crate) fn network(
@@ -49,12 +49,23 @@ pub(crate) fn network(
 /// ``ponq-infer`` program does with the same options (the same mesh, bit for bit).
 ///
 /// Args:
-///     sdf: 3D array (nx, ny, nz) of signed distances, negative inside, in the units of
-///         ``bounds``; any float dtype, C or Fortran order (a NumPy array, or anything
-///         ``numpy.asarray`` takes, e.g. ``tensor.numpy()``). Node (i, j, k) is at
-///         ``lo + (i, j, k) * h``; the cells must be cubes. At least 2 nodes per axis.
+///     sdf: 3D array (nx, ny, nz) of signed distances (negative inside, in the units of
+///         ``bounds``), or any field whose ``level`` set is the surface: a distance in other
+///         units (voxels, a normalised TSDF), inside positive, an occupancy or another
+///         monotone function of a distance; its values are read into distances first, as
+///         ``ponq-infer`` reads a grid (``level``, ``inside``, ``field``). Any float dtype, C or
+///         Fortran order (a NumPy array, or anything ``numpy.asarray`` takes, e.g.
+///         ``tensor.numpy()``). Node (i, j, k) is at ``lo + (i, j, k) * h``; the cells must be
+///         cubes. At least 2 nodes per axis.
 ///     bounds: the box spanned by the grid nodes, 6 floats
-///         ``(xmin, ymin, zmin, xmax, ymax, zmax)``; default ``[-1, 1]^3``.
+///         ``(xmin, ymin, zmin, xmax, ymax, zmax)``; default ``[-1, 1]^3`` (with unequal node
+///         counts: the longest axis over [-1, 1], the others centred, cubic cells).
+///     level: the iso-level of the surface; default 0 (0.5 for a saturated field in [0, 1]
+///         without a sign change at 0: an occupancy, with a ``UserWarning``).
+///     inside: ``"auto"`` (the side the grid's boundary lies on is outside), ``"negative"``
+///         or ``"positive"``.
+///     field: ``"auto"`` (measured: rescaled or mapped into distances when it is not one) or
+///         ``"distance"`` (the values as distances in the units of ``bounds``).
 ///     model: path of network weights (a ``.bpk`` file with its ``.json`` config beside it);
 ///         default: the shipped model (``$PONQ_MODEL`` if set). Loaded once and kept.
 ///     lite: PoNQ-lite: one point per cell (fewer vertices, the same sharp features).
@@ -86,14 +97,17 @@ pub(crate) fn network(
 ///     RuntimeError: a failure of the computation.
 #[pyfunction]
 #[pyo3(
-    signature = (sdf, *, bounds=None, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), open=None, refine="auto", threads=None, return_ponq=false, check=true),
-    text_signature = "(sdf, *, bounds=None, model=None, lite=False, coarsen=0, merge_smooth=15.0, open=None, refine='auto', threads=None, return_ponq=False, check=True)"
+    signature = (sdf, *, bounds=None, level=None, inside="auto", field="auto", model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), open=None, refine="auto", threads=None, return_ponq=false, check=true),
+    text_signature = "(sdf, *, bounds=None, level=None, inside='auto', field='auto', model=None, lite=False, coarsen=0, merge_smooth=15.0, open=None, refine='auto', threads=None, return_ponq=False, check=True)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn infer<'py>(
     py: Python<'py>,
     sdf: &Bound<'py, PyAny>,
     bounds: Option<Vec<f64>>,
+    level: Option<f64>,
+    inside: &str,
+    field: &str,
     model: Option<PathBuf>,
     lite: bool,
     coarsen: u32,
@@ -109,20 +123,12 @@ pub(crate) fn infer<'py>(
     }
     let open = open_arg(open.as_ref())?;
     check_open(open)?;
-    let opts = infer_options(bounds, lite, coarsen, merge_smooth, open, refine)?;
+    let condition = condition_options(level, inside, field)?;
+    let opts = infer_options(bounds, lite, coarsen, merge_smooth, open, refine, condition)?;
     let grid = grid3(sdf)?;
     let (res, report) = run(py, threads, move || {
         // The checks of `predict`, first, so that their errors are input errors.
         Frame::of(&grid, opts.bounds).map_err(|e| Failure::Value(format!("{e:#}")))?;
-        let (min, max) = grid
-            .data
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
-        if !(min < 0.0 && max > 0.0) {
-            return bad(format!(
-                "the SDF has no sign change (values in [{min}, {max}]): the surface is empty; nothing to mesh"
-            ));
-        }
         let dev = ponq_model::backend::cpu();
         let (net, cfg) = network(model.as_deref(), &dev)?;
         let p = predict(&net, cfg.encoder_layers, &grid, &opts, &dev, |_, _| {})?;
@@ -130,6 +136,7 @@ pub(crate) fn infer<'py>(
         let report = (check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
         Ok((res, report))
     })?;
+    warn_conditioning(py, res.conditioning.as_ref())?;
     if let Some(m) = &res.message {
         warn(py, "UserWarning", m)?;
     }
@@ -139,4 +146,18 @@ pub(crate) fn infer<'py>(
         out.push(ponq_out(py, &res.ponq)?);
     }
     tuple(py, out)
+}
+
+/// A `UserWarning` with what the conditioning decided that the caller should hear (a level or
+/// a sign it chose, a loose map), as `ponq-infer` prints it.
+pub(crate) fn warn_conditioning(
+    py: Python<'_>,
+    c: Option<&ponq_data::condition::Conditioning>,
+) -> PyResult<()> {
+    if let Some(c) = c
+        && !c.notes.is_empty()
+    {
+        warn(py, "UserWarning", &c.summary())?;
+    }
+    Ok(())
 }

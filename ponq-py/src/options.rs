@@ -22,9 +22,31 @@ pub(crate) fn domain(bounds: Option<Vec<f64>>) -> PyResult<([f64; 3], [f64; 3])>
     }
 }
 
+/// How a grid's or a field's values are read (`level=`, `inside=`, `field=`), checked as
+/// `ponq-infer` checks `--level`, `--inside` and `--field`.
+pub(crate) fn condition_options(
+    level: Option<f64>,
+    inside: &str,
+    field: &str,
+) -> PyResult<ponq_data::condition::ConditionOptions> {
+    if level.is_some_and(|l| !l.is_finite()) {
+        return Err(value_err("level must be a finite number"));
+    }
+    Ok(ponq_data::condition::ConditionOptions {
+        level,
+        inside: inside
+            .parse()
+            .map_err(|e| value_err(format!("invalid value '{inside}' for inside: {e}")))?,
+        field: field
+            .parse()
+            .map_err(|e| value_err(format!("invalid value '{field}' for field: {e}")))?,
+    })
+}
+
 /// The inference options of the keyword arguments `ponq.infer` and `ponq.infer_field` share,
 /// checked as `ponq-infer` checks its flags (`merge_smooth` `None` or 0 keeps every point;
 /// `lite` / `coarsen` turn the refinement off, and refuse `refine='on'`).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn infer_options(
     bounds: Option<Vec<f64>>,
     lite: bool,
@@ -32,6 +54,7 @@ pub(crate) fn infer_options(
     merge_smooth: Option<f64>,
     open: Option<f64>,
     refine: &str,
+    condition: ponq_data::condition::ConditionOptions,
 ) -> PyResult<InferOptions> {
     let merge_smooth = merge_smooth.unwrap_or(0.0);
     if !(0.0..=180.0).contains(&merge_smooth) {
@@ -59,6 +82,7 @@ pub(crate) fn infer_options(
         } else {
             refine
         },
+        condition,
         ..Default::default()
     })
 }

@@ -2,7 +2,7 @@
 //!
 //! Subcommands: `sdf` (an exact signed distance grid as a `.npy` file), `meshes` and `synth`
 //! (dataset records, see `ponq_data::dataset`), `break` (a broken copy of a mesh, to test the
-//! repair on).
+//! repair on), `field` (a grid in another convention, to test how grids are read).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -62,6 +62,29 @@ enum Command {
     /// full of (triangle soups, cracks, flipped faces and parts, duplicates, holes, nested
     /// shells, overlapping copies, fins), to test and measure the repair on.
     Break(BreakArgs),
+    /// Write a copy of an SDF grid in another convention, as people's grids come: other units
+    /// (scale:F, voxel), TSDFs (tsdf:N normalised over N cells, tsdf-world:N truncated at N
+    /// cells), inside positive, occupancy-like fields (tanh, sigmoid: inside near 1, its
+    /// surface at 0.5), squared (d|d|), noise:S (S cells), offset:L (the surface at level L),
+    /// to test and measure how `ponq-infer` reads them.
+    Field(FieldArgs),
+}
+
+#[derive(Args, Debug)]
+struct FieldArgs {
+    /// Input grid (.npy): a signed distance, negative inside, in the [-1,1] frame as
+    /// `ponq-prep sdf` writes it (the cell is 2 / (nodes - 1) of its longest axis).
+    grid: PathBuf,
+    /// Output grid (.npy, float32).
+    #[arg(short, long, value_name = "OUT.npy")]
+    output: PathBuf,
+    /// The convention: exact, scale:F, voxel, tsdf:N, tsdf-world:N, tanh, sigmoid,
+    /// inside-positive, squared, noise:S, offset:L.
+    #[arg(long, value_name = "NAME")]
+    convention: ponq_data::conventions::Convention,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(Args, Debug)]
@@ -481,6 +504,28 @@ fn run_batch_cmd<J: Job>(jobs: &[J], b: &BatchArgs) -> Result<BatchOutcome> {
     Ok(BatchOutcome::Failed)
 }
 
+fn run_field(a: &FieldArgs) -> Result<()> {
+    check_output_dir(&a.output)?;
+    let g = io::npy::read_npy_grid(&a.grid).context("cannot read the grid")?;
+    let n = g.dims.iter().max().copied().unwrap_or(2).max(2) - 1;
+    let h = 2.0 / n as f64;
+    let values = a.convention.apply(&g.data, h, a.seed);
+    let out = io::npy::Grid3::new(g.dims, values).context("the converted grid")?;
+    io::npy::write_npy_grid_f32(&a.output, &out).context("writing the grid")?;
+    println!(
+        "{}: {} copy of {} ({:?} nodes){}",
+        a.output.display(),
+        a.convention,
+        a.grid.display(),
+        g.dims,
+        a.convention
+            .level()
+            .map(|l| format!("; its surface is at --level {l}"))
+            .unwrap_or_default()
+    );
+    Ok(())
+}
+
 fn run_break(a: &BreakArgs) -> Result<()> {
     if !RES_RANGE.contains(&a.res) {
         bail!(
@@ -531,6 +576,7 @@ fn main() -> ExitCode {
                 run_batch_cmd(&jobs, &a.batch)
             }),
         Command::Break(a) => run_break(a).map(|()| BatchOutcome::AllDone),
+        Command::Field(a) => run_field(a).map(|()| BatchOutcome::AllDone),
         Command::Synth(a) => {
             let synth = SynthOptions {
                 mesh_resolution: a.mesh_resolution,

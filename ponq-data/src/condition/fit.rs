@@ -2,11 +2,13 @@
 
 /// A monotone non-decreasing map from a field's value `u` to the distance: piecewise linear
 /// through its knots in the coordinate `s = S(u)`, continued past the outermost knots along
-/// their segments' lines. `S(u) = u`, but on a side where the field saturates (`tanh`, an
-/// occupancy: it approaches a value `a` far from the surface, exponentially in the distance),
-/// `S(u) = -a ln(1 - u / a)`, which is `u` near 0 and linear in the distance near `a`: sparse
-/// knots then interpolate the saturating part too (linear interpolation in `u` would put a
-/// value between knots 1 and 2 cells out a fifth of a cell off).
+/// their segments' lines. `S` makes the field nearly linear in the distance, so that sparse
+/// knots interpolate well: first `w = sign(u) |u|^(1/p)` for a field that grows as the
+/// distance to the power `p` near its surface (`d |d|`: `p = 2`; 1 for the others), then, on a
+/// side where the field saturates (`tanh`, an occupancy: it approaches a value `a` far from the
+/// surface, exponentially in the distance), `-a' ln(1 - w / a')` (`a' = w(a)`), which is `w`
+/// near 0 and linear in the distance near `a` (linear interpolation in `u` would put a value
+/// between knots 1 and 2 cells out a fifth of a cell off).
 ///
 /// Invariants: at least two knots, their `s` strictly increasing, distances non-decreasing.
 #[derive(Debug, Clone, PartialEq)]
@@ -17,16 +19,26 @@ pub struct MonotoneMap {
     /// The values the field saturates at below and above 0 (`NaN`: it does not).
     lo: f64,
     hi: f64,
+    /// The field's power law near its surface (`p` above).
+    power: f64,
 }
 
 impl MonotoneMap {
     /// `S(u)` ([`MonotoneMap`]).
     fn s_of(&self, u: f64) -> f64 {
-        let a = if u > 0.0 { self.hi } else { self.lo };
-        if !(a.is_finite() && a != 0.0 && (u / a) > 0.0) {
-            return u;
+        let pw = |x: f64| {
+            if self.power == 1.0 {
+                x
+            } else {
+                x.signum() * x.abs().powf(1.0 / self.power)
+            }
+        };
+        let w = pw(u);
+        let a = pw(if u > 0.0 { self.hi } else { self.lo });
+        if !(a.is_finite() && a != 0.0 && (w / a) > 0.0) {
+            return w;
         }
-        -a * (1.0 - (u / a).min(1.0 - 1e-12)).ln()
+        -a * (1.0 - (w / a).min(1.0 - 1e-12)).ln()
     }
 
     /// The map at `u`.
@@ -79,6 +91,11 @@ impl MonotoneMap {
         0.5 * (lo + hi)
     }
 
+    /// The power law near the surface the map undoes (1: none; [`MonotoneMap`]).
+    pub fn power(&self) -> f64 {
+        self.power
+    }
+
     /// The knots (`S(value)`, distance).
     pub fn knots(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
         self.s.iter().copied().zip(self.d.iter().copied())
@@ -128,10 +145,14 @@ pub fn fit_linear(pairs: &[(f64, f64)], h: f64) -> Option<(f64, bool)> {
 /// (at least 3 pairs, at most 256 bins), each bin's median value and median distance a knot,
 /// the knot (0, 0) added, then made non-decreasing (pool-adjacent-violators). `extremes` are
 /// the values the field saturates at below and above 0 (its asymptotes, [`MonotoneMap`];
-/// `NaN` where it does not).
-/// Returns the map and its median absolute error on the pairs. `None` without at least 100
+/// `NaN` where it does not); `h` is the cell. Returns the map and its median absolute error on
+/// the pairs. `None` without at least 100
 /// pairs.
-pub fn fit_monotone(pairs: &[(f64, f64)], extremes: (f64, f64)) -> Option<(MonotoneMap, f64)> {
+pub fn fit_monotone(
+    pairs: &[(f64, f64)],
+    extremes: (f64, f64),
+    h: f64,
+) -> Option<(MonotoneMap, f64)> {
     if pairs.len() < 100 {
         return None;
     }
@@ -185,6 +206,7 @@ pub fn fit_monotone(pairs: &[(f64, f64)], extremes: (f64, f64)) -> Option<(Monot
         d,
         lo: extremes.0,
         hi: extremes.1,
+        power: power_law(pairs, h),
     };
     map.s = u.iter().map(|&x| map.s_of(x)).collect();
     if map.s.windows(2).any(|w| w[1] <= w[0]) {
@@ -196,6 +218,35 @@ pub fn fit_monotone(pairs: &[(f64, f64)], extremes: (f64, f64)) -> Option<(Monot
         .collect();
     let e = median(&mut err);
     Some((map, e))
+}
+
+/// The power `p` of `|u| ~ |d|^p` of a field that grows faster than the distance: the
+/// least-squares slope of `ln |u|` over `ln |d|` for the pairs from 1 to 4 cells out (`h` the
+/// cell; nearer pairs carry the error of a zero set placed by linear interpolation, which such
+/// a field makes large), when it is at least 1.4 (clamped to 4); else 1 (distances, and fields
+/// that saturate: their slope there is below 1).
+fn power_law(pairs: &[(f64, f64)], h: f64) -> f64 {
+    let (xs, ys): (Vec<f64>, Vec<f64>) = pairs
+        .iter()
+        .filter(|(u, d)| *u != 0.0 && d.abs() >= h && d.abs() <= 4.0 * h)
+        .map(|&(u, d)| (d.abs().ln(), u.abs().ln()))
+        .unzip();
+    if xs.len() < 30 {
+        return 1.0;
+    }
+    let n = xs.len() as f64;
+    let (mx, my) = (xs.iter().sum::<f64>() / n, ys.iter().sum::<f64>() / n);
+    let sxx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+    let sxy: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+    if !(sxx > 1e-6) {
+        return 1.0;
+    }
+    let p = sxy / sxx;
+    if p.is_finite() && p >= 1.4 {
+        p.min(4.0)
+    } else {
+        1.0
+    }
 }
 
 /// The median (upper middle) of `v`; `NaN` for an empty slice.
@@ -249,7 +300,7 @@ mod tests {
             } else {
                 (f64::NAN, f64::NAN)
             };
-            let (map, err) = fit_monotone(&p, ext).unwrap();
+            let (map, err) = fit_monotone(&p, ext, h).unwrap();
             assert!(err < 0.05 * h, "{err}");
             for d in [-3.0 * h, -0.5 * h, 0.0, 0.7 * h, 2.5 * h] {
                 assert!(

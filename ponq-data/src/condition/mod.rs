@@ -44,7 +44,7 @@ mod scan;
 
 pub use crossings::{Crossing, crossings, pairs};
 pub use fit::{MonotoneMap, fit_linear, fit_monotone};
-pub use scan::FieldScan;
+pub use scan::{FieldScan, ValueRange, Window, classify};
 
 use std::time::Duration;
 

@@ -25,12 +25,6 @@ const MAX_TRIED: usize = 60_000;
 /// Pairs reach this many cells from the zero set.
 const PAIR_CELLS: f64 = 6.0;
 
-/// A window of the grid kept for the analysis: `dims` nodes from `origin`, C order.
-struct Window {
-    dims: [usize; 3],
-    data: Vec<f32>,
-}
-
 /// A window being filled plane by plane, and its place in the lattice.
 struct Open {
     origin: [usize; 3],
@@ -227,14 +221,12 @@ impl FieldScan {
         }
     }
 
-    /// Decides the conditioning; `frame_scale` is the grid frame's normalised units per unit
-    /// of its bounds.
+    /// The level and the sign the scan decides, and the notes that say so: the first half of
+    /// [`FieldScan::finish`].
     ///
     /// # Errors
-    /// Fewer planes than the grid has; no sign change at the level (given, or 0 and 0.5 for a
-    /// field in `[0, 1]`): the message gives the values' range and what to try; a boundary
-    /// split between both sides when the sign is to be found.
-    pub fn finish(mut self, frame_scale: f64) -> Result<Conditioning> {
+    /// As [`FieldScan::finish`].
+    pub fn level_and_sign(&self) -> Result<(f64, bool, Vec<String>)> {
         if self.planes != self.dims[0] {
             return Err(DataError::Invalid(format!(
                 "field scan: {} planes of {}",
@@ -242,7 +234,6 @@ impl FieldScan {
             )));
         }
         let mut notes = Vec::new();
-        // The level.
         let crosses = |l: f64| self.min < l && self.max > l;
         let (level, li) = match self.opts.level {
             Some(l) if crosses(l) => (l, 0),
@@ -275,7 +266,6 @@ impl FieldScan {
                 )));
             }
         };
-        // The sign.
         let (above, below) = self.boundary[li];
         let flip = match self.opts.inside {
             Inside::Negative => false,
@@ -286,10 +276,11 @@ impl FieldScan {
                 if share_below <= 0.05 {
                     false
                 } else if share_below >= 0.95 {
-                    notes.push(format!(
+                    notes.push(
                         "inside is above the level (the grid's boundary lies below it): sign \
                          flipped (--inside negative keeps it)"
-                    ));
+                            .to_string(),
+                    );
                     true
                 } else {
                     return Err(DataError::Invalid(format!(
@@ -303,23 +294,30 @@ impl FieldScan {
                 }
             }
         };
-        let mut c = Conditioning {
-            level,
-            flip,
-            kind: Kind::Distance,
-            frame_scale,
-            slope: f64::NAN,
-            time: Default::default(),
-            cells: self.dims.iter().max().copied().unwrap_or(2).max(2) - 1,
-            notes,
-        };
-        if self.opts.field == FieldKind::Distance {
-            c.time = self.started.elapsed();
-            return Ok(c);
+        Ok((level, flip, notes))
+    }
+
+    /// The extreme values seen, how often each, and the nodes scanned.
+    pub fn value_range(&self) -> ValueRange {
+        ValueRange {
+            min: self.min,
+            max: self.max,
+            n_min: self.n_min,
+            n_max: self.n_max,
+            nodes: self.dims.iter().product::<usize>() as u64,
         }
-        // The windows to analyse, as values after level and sign.
-        let n = self.dims.iter().max().copied().unwrap_or(2).max(2) - 1;
-        let h = 2.0 / n as f64;
+    }
+
+    /// Decides the conditioning; `frame_scale` is the grid frame's normalised units per unit
+    /// of its bounds.
+    ///
+    /// # Errors
+    /// Fewer planes than the grid has; no sign change at the level (given, or 0; 0.5 for a
+    /// saturated field in `[0, 1]`): the message gives the values' range and what to try; a
+    /// boundary split between both sides when the sign is to be found.
+    pub fn finish(mut self, frame_scale: f64) -> Result<Conditioning> {
+        let (level, flip, notes) = self.level_and_sign()?;
+        let cells = self.dims.iter().max().copied().unwrap_or(2).max(2) - 1;
         let windows: Vec<Window> = match self.whole.take() {
             Some(data) => vec![Window {
                 dims: self.dims,
@@ -327,143 +325,177 @@ impl FieldScan {
             }],
             None => self.windows.drain(..).flatten().collect(),
         };
-        let sign = if flip { -1.0 } else { 1.0 };
-        let u_of = |v: f32| sign * (f64::from(v) - level);
-        // Clamped values of a truncated field hold no distance (compared as stored, f32).
-        let many = self.dims.iter().product::<usize>() as u64 / 100;
-        let (lo_clamp, hi_clamp) = (
-            (self.n_min > many).then_some(self.min as f32),
-            (self.n_max > many).then_some(self.max as f32),
-        );
-        let clamped = |v: f32| Some(v) == lo_clamp || Some(v) == hi_clamp;
-        let nodes: usize = windows.iter().map(|w| w.data.len()).sum();
-        let stride = nodes.div_ceil(MAX_TRIED * 4).max(1);
-        let analyse = |map: &(dyn Fn(f64) -> f64 + Sync)| -> Vec<(f64, f64)> {
-            windows
-                .par_iter()
-                .flat_map_iter(|w| {
-                    let u: Vec<f64> = w.data.iter().map(|&v| u_of(v)).collect();
-                    let mapped: Vec<f64> = u.iter().map(|&x| map(x)).collect();
-                    let zero = crossings(&mapped, &u, w.dims, h);
-                    let values: Vec<f64> = w
-                        .data
-                        .iter()
-                        .zip(&u)
-                        .map(|(&v, &x)| if clamped(v) { f64::NAN } else { x })
-                        .collect();
-                    pairs(
-                        &values,
-                        &u,
-                        w.dims,
-                        h,
-                        &zero,
-                        PAIR_CELLS,
-                        stride,
-                        f64::is_nan,
-                    )
-                })
-                .collect()
+        let mut c = Conditioning {
+            level,
+            flip,
+            kind: Kind::Distance,
+            frame_scale,
+            slope: f64::NAN,
+            time: Default::default(),
+            cells,
+            notes,
         };
-        let first = analyse(&|u| u);
-        let Some((slope, linear)) = fit_linear(&first, h) else {
-            c.notes.push(format!(
-                "too few nodes near flat pieces of the surface to measure the field ({} pairs): \
-                 taken as a signed distance",
-                first.len()
-            ));
-            c.time = self.started.elapsed();
-            return Ok(c);
-        };
-        c.slope = slope * frame_scale;
-        let residual_linear = {
-            let mut e: Vec<f64> = first.iter().map(|&(u, d)| (u / slope - d).abs()).collect();
-            median(&mut e) / h
-        };
-        // The field's extremes after level and sign are the asymptotes of a saturating field
-        // (tanh, an occupancy): a side counts as saturated when a fifth of its nodes
-        // analysed lie within 0.5% of the range from its extreme (the deepest nodes of a thin
-        // part alone do not make one).
-        let (ulo, uhi) = if flip {
-            (level - self.max, level - self.min)
-        } else {
-            (self.min - level, self.max - level)
-        };
-        let margin = 0.005 * (uhi - ulo);
-        let (mut near_lo, mut near_hi, mut below, mut above) = (0usize, 0usize, 0usize, 0usize);
-        for w in &windows {
-            for &v in &w.data {
-                let u = u_of(v);
-                if u < 0.0 {
-                    below += 1;
-                    near_lo += usize::from(u <= ulo + margin);
-                } else {
-                    above += 1;
-                    near_hi += usize::from(u >= uhi - margin);
-                }
-            }
+        if self.opts.field != FieldKind::Distance {
+            classify(&mut c, &windows, &self.value_range());
         }
-        let sat_lo = near_lo * 5 >= below && below > 0;
-        let sat_hi = near_hi * 5 >= above && above > 0;
-        // A field that saturates on one side and stays within that value's magnitude on the
-        // other (tanh, an occupancy: inside a part too thin to reach its own asymptote) is
-        // taken to saturate symmetrically.
-        let extremes = match (sat_lo, sat_hi) {
-            (true, true) => (ulo, uhi),
-            (false, true) if -ulo <= uhi => (-uhi, uhi),
-            (true, false) if uhi <= -ulo => (ulo, -ulo),
-            (true, false) => (ulo, f64::NAN),
-            (false, true) => (f64::NAN, uhi),
-            (false, false) => (f64::NAN, f64::NAN),
-        };
-        let monotone = fit_monotone(&first, extremes);
-        let nonlinear = !linear
-            && residual_linear > 0.05
-            && monotone
-                .as_ref()
-                .is_some_and(|(_, e)| *e / h < 0.5 * residual_linear);
-        if first.len() < MIN_PAIRS || !nonlinear {
-            if (slope * frame_scale - 1.0).abs() > 0.03 {
-                c.kind = Kind::Scaled {
-                    factor: 1.0 / slope,
-                };
-            }
-            c.time = self.started.elapsed();
-            return Ok(c);
-        }
-        // A monotone function of the distance: refit twice on the zero set of the mapped
-        // field (its crossings placed by nearly linear values).
-        let Some((mut map, mut err)) = monotone else {
-            c.time = self.started.elapsed();
-            return Ok(c);
-        };
-        let mut count = first.len();
-        for _ in 0..2 {
-            let m = map.clone();
-            let again = analyse(&|u| m.eval(u));
-            match fit_monotone(&again, extremes) {
-                Some((m2, e2)) if again.len() >= MIN_PAIRS => {
-                    map = m2;
-                    err = e2;
-                    count = again.len();
-                }
-                _ => break,
-            }
-        }
-        if err / h > 0.15 {
-            c.notes.push(format!(
-                "the field is not one function of the distance everywhere (the map's median \
-                 error is {:.2} cells): expect a surface near marching cubes'",
-                err / h
-            ));
-        }
-        c.kind = Kind::Mapped {
-            map,
-            residual_cells: err / h,
-            pairs: count,
-        };
         c.time = self.started.elapsed();
         Ok(c)
     }
+}
+
+/// The extreme values of a field and how often each occurs (a truncated field holds many of
+/// them), over `nodes` nodes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValueRange {
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Nodes at the smallest value.
+    pub n_min: u64,
+    /// Nodes at the largest value.
+    pub n_max: u64,
+    /// Nodes.
+    pub nodes: u64,
+}
+
+/// A block of a field's nodes for [`classify`]: `dims` nodes in C order at the grid's spacing.
+pub struct Window {
+    /// Nodes per axis.
+    pub dims: [usize; 3],
+    /// The field's values.
+    pub data: Vec<f32>,
+}
+
+/// Measures what kind of field `windows` (blocks of nodes around its zero set, at the grid's
+/// spacing, `c.cells` cells along its longest axis) hold, after `c`'s level and sign, and sets
+/// `c.kind` and `c.slope` ([`Kind`]); `range` holds the field's extremes (clamped values of a
+/// truncated field give no pair).
+pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
+    let (level, flip, frame_scale) = (c.level, c.flip, c.frame_scale);
+    let h = 2.0 / c.cells.max(1) as f64;
+    let sign = if flip { -1.0 } else { 1.0 };
+    let u_of = |v: f32| sign * (f64::from(v) - level);
+    // Clamped values of a truncated field hold no distance (compared as stored, f32).
+    let many = range.nodes / 100;
+    let (lo_clamp, hi_clamp) = (
+        (range.n_min > many).then_some(range.min as f32),
+        (range.n_max > many).then_some(range.max as f32),
+    );
+    let clamped = |v: f32| Some(v) == lo_clamp || Some(v) == hi_clamp;
+    let nodes: usize = windows.iter().map(|w| w.data.len()).sum();
+    let stride = nodes.div_ceil(MAX_TRIED * 4).max(1);
+    let analyse = |map: &(dyn Fn(f64) -> f64 + Sync)| -> Vec<(f64, f64)> {
+        windows
+            .par_iter()
+            .flat_map_iter(|w| {
+                let u: Vec<f64> = w.data.iter().map(|&v| u_of(v)).collect();
+                let mapped: Vec<f64> = u.iter().map(|&x| map(x)).collect();
+                let zero = crossings(&mapped, &u, w.dims, h);
+                let values: Vec<f64> = w
+                    .data
+                    .iter()
+                    .zip(&u)
+                    .map(|(&v, &x)| if clamped(v) { f64::NAN } else { x })
+                    .collect();
+                pairs(&values, &u, w.dims, h, &zero, PAIR_CELLS, stride, f64::is_nan)
+            })
+            .collect()
+    };
+    let first = analyse(&|u| u);
+    let Some((slope, linear)) = fit_linear(&first, h) else {
+        c.notes.push(format!(
+            "too few nodes near flat pieces of the surface to measure the field ({} pairs): \
+             taken as a signed distance",
+            first.len()
+        ));
+        return;
+    };
+    c.slope = slope * frame_scale;
+    let residual_linear = {
+        let mut e: Vec<f64> = first.iter().map(|&(u, d)| (u / slope - d).abs()).collect();
+        median(&mut e) / h
+    };
+    // The field's extremes after level and sign are the asymptotes of a saturating field
+    // (tanh, an occupancy): a side counts as saturated when a fifth of its nodes analysed lie
+    // within 0.5% of the range from its extreme (the deepest nodes of a thin part alone do not
+    // make one).
+    let (ulo, uhi) = if flip {
+        (level - range.max, level - range.min)
+    } else {
+        (range.min - level, range.max - level)
+    };
+    let margin = 0.005 * (uhi - ulo);
+    let (mut near_lo, mut near_hi, mut below, mut above) = (0usize, 0usize, 0usize, 0usize);
+    for w in windows {
+        for &v in &w.data {
+            let u = u_of(v);
+            if u < 0.0 {
+                below += 1;
+                near_lo += usize::from(u <= ulo + margin);
+            } else {
+                above += 1;
+                near_hi += usize::from(u >= uhi - margin);
+            }
+        }
+    }
+    let sat_lo = near_lo * 5 >= below && below > 0;
+    let sat_hi = near_hi * 5 >= above && above > 0;
+    // A field that saturates on one side and stays within that value's magnitude on the
+    // other (tanh, an occupancy: inside a part too thin to reach its own asymptote) is taken
+    // to saturate symmetrically.
+    let extremes = match (sat_lo, sat_hi) {
+        (true, true) => (ulo, uhi),
+        (false, true) if -ulo <= uhi => (-uhi, uhi),
+        (true, false) if uhi <= -ulo => (ulo, -ulo),
+        (true, false) => (ulo, f64::NAN),
+        (false, true) => (f64::NAN, uhi),
+        (false, false) => (f64::NAN, f64::NAN),
+    };
+    let monotone = fit_monotone(&first, extremes, h);
+    let nonlinear = !linear
+        && residual_linear > 0.05
+        && monotone
+            .as_ref()
+            .is_some_and(|(_, e)| *e / h < 0.5 * residual_linear);
+    if first.len() < MIN_PAIRS || !nonlinear {
+        if (slope * frame_scale - 1.0).abs() > 0.03 {
+            c.kind = Kind::Scaled {
+                factor: 1.0 / slope,
+            };
+        }
+        return;
+    }
+    // A monotone function of the distance: refit twice on the zero set of the mapped field
+    // (its crossings placed by nearly linear values).
+    let Some((mut map, mut err)) = monotone else {
+        return;
+    };
+    let mut count = first.len();
+    for _ in 0..2 {
+        let m = map.clone();
+        let again = analyse(&|u| m.eval(u));
+        match fit_monotone(&again, extremes, h) {
+            Some((m2, e2)) if again.len() >= MIN_PAIRS => {
+                map = m2;
+                err = e2;
+                count = again.len();
+            }
+            _ => break,
+        }
+    }
+    if err / h > 0.15 {
+        c.notes.push(format!(
+            "the field is not one function of the distance everywhere (the map's median error \
+             is {:.2} cells): expect a surface near marching cubes'",
+            err / h
+        ));
+    }
+    c.kind = Kind::Mapped {
+        map,
+        residual_cells: err / h,
+        pairs: count,
+    };
 }
 
 /// The median (upper middle); `NaN` for an empty slice.

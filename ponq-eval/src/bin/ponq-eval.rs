@@ -41,6 +41,14 @@ enum Cmd {
     /// class: valid outputs, F1 / NC / EF1 beside the clean copies' of the same shapes, the
     /// mean and worst F1 loss, time).
     Broken(BrokenArgs),
+    /// Grids in people's conventions side by side with the exact grid: every mesh of DATA's
+    /// exact SDF grid at each --res rewritten in each convention (`ponq-prep field --help`),
+    /// each copy through `ponq-infer`'s path (its values conditioned into distances) and
+    /// through marching cubes at the copy's level and sign, both compared with the mesh.
+    /// Writes OUT/per_copy.csv (resumable: rerun the same command) and OUT/summary.md (per
+    /// grid and convention: valid outputs, F1 / NC / EF1 beside the exact grid's and marching
+    /// cubes', the worst F1 loss, copies below marching cubes, the conditioning's time).
+    Fields(FieldsArgs),
     /// Summarise batch logs (the JSON lines `ponq-prep meshes` and `ponq-infer DIR` write
     /// beside their outputs; several logs, e.g. one per shard, are merged): shapes by status,
     /// errors by reason, seconds per shape (percentiles), peak memory, invalid outputs.
@@ -102,6 +110,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Run(a) => run_split(a),
         Cmd::Broken(a) => run_broken(a),
+        Cmd::Fields(a) => run_fields(a),
         Cmd::Log { logs } => {
             let mut files = Vec::new();
             for p in logs {
@@ -344,6 +353,184 @@ struct BrokenArgs {
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct FieldsArgs {
+    /// A folder of meshes (searched recursively; the first folder below it is a shape's
+    /// group in the CSV).
+    data: PathBuf,
+    /// Cells per side of the grids, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "32,64")]
+    res: Vec<usize>,
+    /// Conventions, comma-separated (`ponq-prep field --help`), or `all` (the 16 of the
+    /// benchmark).
+    #[arg(long, value_delimiter = ',', default_value = "all")]
+    conventions: Vec<String>,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Surface and sharp-edge samples per mesh for the metrics.
+    #[arg(long, default_value_t = 100_000)]
+    samples: usize,
+    /// Only the first N meshes (sorted by name).
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Network weights [default: the shipped model].
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Report folder.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn run_fields(a: FieldsArgs) -> Result<()> {
+    use indicatif::{ProgressBar, ProgressStyle};
+    use ponq_data::conventions::Convention;
+    use ponq_eval::fields::{FieldRow, evaluate_copy, summary_markdown};
+    use std::io::Write;
+    if a.res.is_empty() || a.res.iter().any(|r| !(2..=256).contains(r)) {
+        bail!("--res takes resolutions in 2..=256, got {:?}", a.res);
+    }
+    if a.samples == 0 {
+        bail!("--samples must be positive");
+    }
+    let conventions: Vec<Convention> = if a.conventions.iter().any(|c| c == "all") {
+        Convention::BENCHMARK.to_vec()
+    } else {
+        a.conventions
+            .iter()
+            .map(|c| c.parse::<Convention>().map_err(anyhow::Error::msg))
+            .collect::<Result<_>>()?
+    };
+    let (mut shapes, _) = ponq_eval::inputs::inputs(&a.data, None)?;
+    shapes.retain(|(_, p)| ponq_mesh::io::MeshFormat::from_path(p).is_some());
+    if let Some(n) = a.limit {
+        shapes.truncate(n);
+    }
+    if shapes.is_empty() {
+        bail!("no mesh (.obj, .ply, .off, .stl) in {}", a.data.display());
+    }
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("creating {}", a.output.display()))?;
+    let csv = a.output.join("per_copy.csv");
+    let mut rows: Vec<FieldRow> = match std::fs::read_to_string(&csv) {
+        Ok(text) => text.lines().skip(1).filter_map(FieldRow::parse).collect(),
+        Err(_) => Vec::new(),
+    };
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&csv)
+        .with_context(|| format!("opening {}", csv.display()))?;
+    if rows.is_empty() {
+        writeln!(file, "{}", FieldRow::HEADER)?;
+    }
+    let device = ponq_model::backend::cpu();
+    let (net, cfg) = match &a.model {
+        Some(p) => ponq_model::weights::load(p, &device)?,
+        None => ponq_infer::shipped::load(&device)?,
+    };
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((shapes.len() * a.res.len() * conventions.len()) as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("copies {bar:40} {pos}/{len} [{elapsed} < {eta}] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut failed = 0;
+    for (id, path) in &shapes {
+        let group = ponq_eval::inputs::group_of(&a.data, path);
+        bar.set_message(id.clone());
+        let truth = match ponq_eval::inputs::truth(path) {
+            Ok(t) => t,
+            Err(e) => {
+                bar.suspend(|| eprintln!("failed {id}: {e:#}"));
+                failed += 1;
+                bar.inc((a.res.len() * conventions.len()) as u64);
+                continue;
+            }
+        };
+        let Some(mesh) = truth.mesh.as_ref() else {
+            continue;
+        };
+        for &res in &a.res {
+            let todo: Vec<Convention> = conventions
+                .iter()
+                .copied()
+                .filter(|c| {
+                    let name = c.to_string();
+                    !rows
+                        .iter()
+                        .any(|r| &r.shape == id && r.res == res && r.convention == name)
+                })
+                .collect();
+            bar.inc((conventions.len() - todo.len()) as u64);
+            if todo.is_empty() {
+                continue;
+            }
+            let exact = match ponq_eval::inputs::grid_of(&truth, res) {
+                Ok(g) => g,
+                Err(e) => {
+                    bar.suspend(|| eprintln!("failed {id} at {res}: {e:#}"));
+                    failed += 1;
+                    bar.inc(todo.len() as u64);
+                    continue;
+                }
+            };
+            for c in todo {
+                let row = evaluate_copy(
+                    id,
+                    &group,
+                    &exact,
+                    mesh,
+                    c,
+                    a.seed,
+                    a.samples,
+                    &net,
+                    cfg.encoder_layers,
+                    &device,
+                );
+                writeln!(file, "{}", row.csv())?;
+                file.flush()?;
+                rows.push(row);
+                bar.inc(1);
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let table = summary_markdown(&rows);
+    let md = a.output.join("summary.md");
+    std::fs::write(
+        &md,
+        format!(
+            "# Grids in other conventions (seed {})\n\n{} meshes of {}.\n\n{table}",
+            a.seed,
+            shapes.len(),
+            a.data.display()
+        ),
+    )
+    .with_context(|| format!("writing {}", md.display()))?;
+    if !a.quiet {
+        print!("{table}");
+        println!("{}: per copy; {}: this table", csv.display(), md.display());
+    }
+    let errors = rows.iter().filter(|r| !r.error.is_empty()).count();
+    if errors > 0 {
+        eprintln!(
+            "note: {errors} copies could not be reconstructed (their rows in {} hold the error)",
+            csv.display()
+        );
+    }
+    if failed > 0 {
+        bail!("{failed} shape(s) or grids could not be read (see above)");
+    }
+    Ok(())
 }
 
 fn run_broken(a: BrokenArgs) -> Result<()> {

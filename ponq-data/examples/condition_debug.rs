@@ -17,7 +17,7 @@ fn main() {
         .map(|&v| if flip { level - v } else { v - level })
         .collect();
     let z = crossings(&u, &u, g.dims, h);
-    let p = pairs(&u, &u, g.dims, h, &z, 6.0, 1, |_| false);
+    let p = pairs(&u, &u, g.dims, h, &z, 6.0, usize::MAX, |_| false);
     println!("{} crossings, {} pairs", z.len(), p.len());
     let mut hist = [0usize; 8];
     for (_, d) in &p {
@@ -32,7 +32,7 @@ fn main() {
         println!("monotone error {:.4} cells, power {}", e / h, m.power());
         let mapped: Vec<f64> = u.iter().map(|&x| m.eval(x)).collect();
         let z2 = crossings(&mapped, &u, g.dims, h);
-        let p2 = pairs(&u, &u, g.dims, h, &z2, 6.0, 1, |_| false);
+        let p2 = pairs(&u, &u, g.dims, h, &z2, 6.0, usize::MAX, |_| false);
         println!("second pass: {} pairs", p2.len());
         if args.get(4).is_some_and(|f| f == "tanh") {
             pair_errors(&p2, h);

@@ -45,7 +45,7 @@ pub enum Convention {
 
 impl Convention {
     /// Every convention of the benchmark in `docs/fields.md`, in its order.
-    pub const BENCHMARK: [Convention; 16] = [
+    pub const BENCHMARK: [Convention; 17] = [
         Convention::Exact,
         Convention::Scale(0.5),
         Convention::Scale(2.0),
@@ -58,6 +58,7 @@ impl Convention {
         Convention::Tsdf(8.0),
         Convention::TsdfWorld(3.0),
         Convention::InsidePositive,
+        Convention::Offset(0.05),
         Convention::Tanh,
         Convention::Sigmoid,
         Convention::Squared,
@@ -183,7 +184,12 @@ impl std::str::FromStr for Convention {
                 ));
             }
         };
-        if arg.is_some() && matches!(name, "exact" | "voxel" | "tanh" | "sigmoid" | "inside-positive" | "squared") {
+        if arg.is_some()
+            && matches!(
+                name,
+                "exact" | "voxel" | "tanh" | "sigmoid" | "inside-positive" | "squared"
+            )
+        {
             return Err(format!("{name} takes no number: {s:?}"));
         }
         Ok(c)
@@ -211,8 +217,19 @@ mod tests {
         for c in Convention::BENCHMARK {
             assert_eq!(c.to_string().parse::<Convention>().unwrap(), c);
         }
-        assert_eq!("offset:-0.3".parse::<Convention>().unwrap(), Convention::Offset(-0.3));
-        for bad in ["scale", "scale:0", "scale:x", "tsdf:-1", "tanh:2", "blur", "noise:nan"] {
+        assert_eq!(
+            "offset:-0.3".parse::<Convention>().unwrap(),
+            Convention::Offset(-0.3)
+        );
+        for bad in [
+            "scale",
+            "scale:0",
+            "scale:x",
+            "tsdf:-1",
+            "tanh:2",
+            "blur",
+            "noise:nan",
+        ] {
             assert!(bad.parse::<Convention>().is_err(), "{bad}");
         }
     }

@@ -47,8 +47,7 @@ pub struct FieldRow {
 
 impl FieldRow {
     /// The CSV header of [`FieldRow::csv`].
-    pub const HEADER: &'static str =
-        "shape,group,res,convention,kind,valid,f1,nc,ef1,mc_f1,mc_nc,mc_ef1,seconds,condition_ms,error";
+    pub const HEADER: &'static str = "shape,group,res,convention,kind,valid,f1,nc,ef1,mc_f1,mc_nc,mc_ef1,seconds,condition_ms,error";
 
     /// One CSV line (the error text with commas, quotes and newlines replaced).
     pub fn csv(&self) -> String {
@@ -212,7 +211,10 @@ pub fn summary_markdown(rows: &[FieldRow]) -> String {
             names.push(r.convention.clone());
         }
     }
-    let order: Vec<String> = Convention::BENCHMARK.iter().map(|c| c.to_string()).collect();
+    let order: Vec<String> = Convention::BENCHMARK
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
     names.sort_by_key(|n| order.iter().position(|o| o == n).unwrap_or(usize::MAX));
     let exact_f1 = |shape: &str, res: usize| {
         rows.iter()

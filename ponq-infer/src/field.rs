@@ -152,7 +152,8 @@ pub fn field_band_conditioned(
                     {
                         continue;
                     }
-                    let centre = [i, j, k].map(|x| ((x as f64 + 0.5) * res as f64 / pr as f64) as usize);
+                    let centre =
+                        [i, j, k].map(|x| ((x as f64 + 0.5) * res as f64 / pr as f64) as usize);
                     let key = (i as u64)
                         .wrapping_mul(0x9e37_79b9_7f4a_7c15)
                         .wrapping_add((j as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f))

@@ -132,12 +132,8 @@ pub(crate) fn infer_field<'py>(
             });
         }
     };
-    let (band, stats, conditioning, bound) = (
-        built.band,
-        built.stats,
-        built.conditioning,
-        built.lipschitz,
-    );
+    let (band, stats, conditioning, bound) =
+        (built.band, built.stats, built.conditioning, built.lipschitz);
     let summary = conditioning.summary();
     let (res_, report) = run(py, threads, move || {
         let mut p =

@@ -44,8 +44,17 @@ fn gradient(u: &[f64], dims: [usize; 3], x: [usize; 3]) -> [f64; 3] {
 /// `u` itself, or the raw field `u` was mapped from) interpolated the same way. Edges whose
 /// gradient vanishes are left out.
 pub fn crossings(u: &[f64], dir: &[f64], dims: [usize; 3], h: f64) -> Vec<Crossing> {
+    use rayon::prelude::*;
+    (0..dims[0])
+        .into_par_iter()
+        .flat_map_iter(|i| plane_crossings(u, dir, dims, h, i))
+        .collect()
+}
+
+/// [`crossings`] of the edges from the nodes of plane `i`.
+fn plane_crossings(u: &[f64], dir: &[f64], dims: [usize; 3], h: f64, i: usize) -> Vec<Crossing> {
     let mut out = Vec::new();
-    for i in 0..dims[0] {
+    {
         for j in 0..dims[1] {
             for k in 0..dims[2] {
                 let x = [i, j, k];
@@ -89,7 +98,8 @@ pub fn crossings(u: &[f64], dir: &[f64], dims: [usize; 3], h: f64) -> Vec<Crossi
 /// `0.75 h` of the nearest crossing gets its distance to that plane. Nodes farther than
 /// `max_cells` cells, nearer the window's border than their distance (a crossing outside the
 /// window could be nearer), on the wrong side of the plane, or for which `skip(value)` holds
-/// (clamped values of a truncated field) give no pair. Every `stride`-th node is tried.
+/// (clamped values of a truncated field) give no pair. The nodes tried are those within a
+/// block of 8^3 nodes of one holding a crossing, strided down to at most `max_tried`.
 #[allow(clippy::too_many_arguments)]
 pub fn pairs(
     values: &[f64],
@@ -98,7 +108,7 @@ pub fn pairs(
     h: f64,
     zero_set: &[Crossing],
     max_cells: f64,
-    stride: usize,
+    max_tried: usize,
     skip: impl Fn(f64) -> bool + Sync,
 ) -> Vec<(f64, f64)> {
     use rayon::prelude::*;
@@ -109,13 +119,45 @@ pub fn pairs(
     let cos_max = 12f64.to_radians().cos();
     let cos_grad = 8f64.to_radians().cos();
     let reach = max_cells * h;
-    let total = dims.iter().product::<usize>();
-    let stride = stride.max(1);
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    (0..total.div_ceil(stride))
+    // Blocks of 8^3 nodes holding a crossing, and the nodes within one block of them.
+    const B: usize = 8;
+    let nb = dims.map(|d| d.div_ceil(B));
+    let mut holds = vec![false; nb[0] * nb[1] * nb[2]];
+    for c in zero_set {
+        let b: [usize; 3] = std::array::from_fn(|a| ((c.p[a] / h) as usize / B).min(nb[a] - 1));
+        holds[(b[0] * nb[1] + b[1]) * nb[2] + b[2]] = true;
+    }
+    let near_block = |b: [usize; 3]| {
+        (b[0].saturating_sub(1)..=(b[0] + 1).min(nb[0] - 1)).any(|x| {
+            (b[1].saturating_sub(1)..=(b[1] + 1).min(nb[1] - 1)).any(|y| {
+                (b[2].saturating_sub(1)..=(b[2] + 1).min(nb[2] - 1))
+                    .any(|z| holds[(x * nb[1] + y) * nb[2] + z])
+            })
+        })
+    };
+    let mut tried: Vec<usize> = Vec::new();
+    for bx in 0..nb[0] {
+        for by in 0..nb[1] {
+            for bz in 0..nb[2] {
+                if !near_block([bx, by, bz]) {
+                    continue;
+                }
+                for i in bx * B..((bx + 1) * B).min(dims[0]) {
+                    for j in by * B..((by + 1) * B).min(dims[1]) {
+                        for k in bz * B..((bz + 1) * B).min(dims[2]) {
+                            tried.push((i * dims[1] + j) * dims[2] + k);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let stride = tried.len().div_ceil(max_tried.max(1)).max(1);
+    tried
         .into_par_iter()
-        .filter_map(|s| {
-            let f = s * stride;
+        .step_by(stride)
+        .filter_map(|f| {
             let v = values[f];
             if skip(v) {
                 return None;
@@ -235,7 +277,7 @@ mod tests {
             assert!(d.abs() < 1e-12);
             assert!((0..3).all(|a| (c.n[a] - n[a]).abs() < 1e-9));
         }
-        let p = pairs(&u, &u, dims, h, &z, 4.0, 1, |_| false);
+        let p = pairs(&u, &u, dims, h, &z, 4.0, usize::MAX, |_| false);
         assert!(p.len() > 500, "{}", p.len());
         for (v, d) in p {
             assert!((v - d).abs() < 1e-9, "{v} {d}");
@@ -261,7 +303,7 @@ mod tests {
             }
         }
         let z = crossings(&u, &u, dims, h);
-        let p = pairs(&u, &u, dims, h, &z, 4.0, 1, |_| false);
+        let p = pairs(&u, &u, dims, h, &z, 4.0, usize::MAX, |_| false);
         assert!(p.len() > 100);
         // Every pair is exact: the corner regions gave none.
         for (v, d) in p {

@@ -20,8 +20,10 @@ const WINDOW: usize = 32;
 const MAX_WINDOWS: usize = 48;
 /// Fewest pairs to measure a field from; below, it is taken as a distance (with a note).
 const MIN_PAIRS: usize = 100;
-/// Pairs tried per analysis at most (nodes are strided to about this many).
-const MAX_TRIED: usize = 60_000;
+/// Nodes tried for pairs per analysis at most (strided down to about this many); a first
+/// look at fewer decides a distance.
+const MAX_TRIED: usize = 200_000;
+const QUICK_TRIED: usize = 16_000;
 /// Pairs reach this many cells from the zero set.
 const PAIR_CELLS: f64 = 6.0;
 
@@ -383,9 +385,8 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
         (range.n_max > many).then_some(range.max as f32),
     );
     let clamped = |v: f32| Some(v) == lo_clamp || Some(v) == hi_clamp;
-    let nodes: usize = windows.iter().map(|w| w.data.len()).sum();
-    let stride = nodes.div_ceil(MAX_TRIED * 4).max(1);
-    let analyse = |map: &(dyn Fn(f64) -> f64 + Sync)| -> Vec<(f64, f64)> {
+    let analyse = |map: &(dyn Fn(f64) -> f64 + Sync), tried: usize| -> Vec<(f64, f64)> {
+        let per_window = tried.div_ceil(windows.len().max(1));
         windows
             .par_iter()
             .flat_map_iter(|w| {
@@ -398,11 +399,25 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
                     .zip(&u)
                     .map(|(&v, &x)| if clamped(v) { f64::NAN } else { x })
                     .collect();
-                pairs(&values, &u, w.dims, h, &zero, PAIR_CELLS, stride, f64::is_nan)
+                pairs(
+                    &values,
+                    &u,
+                    w.dims,
+                    h,
+                    &zero,
+                    PAIR_CELLS,
+                    per_window,
+                    f64::is_nan,
+                )
             })
             .collect()
     };
-    let first = analyse(&|u| u);
+    // A few nodes tell a distance (the common case, and it must stay cheap); a field that is
+    // not one gets all of them.
+    let mut first = analyse(&|u| u, QUICK_TRIED);
+    if !fit_linear(&first, h).is_some_and(|(_, linear)| linear) || first.len() < MIN_PAIRS {
+        first = analyse(&|u| u, MAX_TRIED);
+    }
     let Some((slope, linear)) = fit_linear(&first, h) else {
         c.notes.push(format!(
             "too few nodes near flat pieces of the surface to measure the field ({} pairs): \
@@ -474,7 +489,7 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
     let mut count = first.len();
     for _ in 0..2 {
         let m = map.clone();
-        let again = analyse(&|u| m.eval(u));
+        let again = analyse(&|u| m.eval(u), MAX_TRIED);
         match fit_monotone(&again, extremes, h) {
             Some((m2, e2)) if again.len() >= MIN_PAIRS => {
                 map = m2;

@@ -363,7 +363,7 @@ struct FieldsArgs {
     /// Cells per side of the grids, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "32,64")]
     res: Vec<usize>,
-    /// Conventions, comma-separated (`ponq-prep field --help`), or `all` (the 16 of the
+    /// Conventions, comma-separated (`ponq-prep field --help`), or `all` (the 17 of the
     /// benchmark).
     #[arg(long, value_delimiter = ',', default_value = "all")]
     conventions: Vec<String>,

@@ -10,7 +10,7 @@ use std::time::Instant;
 use burn::prelude::*;
 use ponq_data::condition::{ConditionOptions, Kind};
 use ponq_data::conventions::Convention;
-use ponq_infer::{InferOptions, finish, predict};
+use ponq_infer::{InferOptions, infer};
 use ponq_mesh::io::npy::Grid3;
 use ponq_mesh::marching_cubes::marching_cubes;
 use ponq_mesh::metrics::{MetricOptions, compare};
@@ -167,8 +167,7 @@ pub fn evaluate_copy(
         ..Default::default()
     };
     let t = Instant::now();
-    let out = predict(net, encoder_layers, &copy, &iopts, device, |_, _| {})
-        .and_then(|p| finish(&p, &iopts));
+    let out = infer(net, encoder_layers, &copy, &iopts, device, |_, _| {});
     row.seconds = t.elapsed().as_secs_f64();
     match out {
         Ok(r) => {
@@ -178,6 +177,7 @@ pub fn evaluate_copy(
                     Kind::Distance => "distance",
                     Kind::Scaled { .. } => "scaled",
                     Kind::Mapped { .. } => "mapped",
+                    Kind::Redistanced { .. } => "redistanced",
                 }
                 .to_string();
             }

@@ -136,7 +136,12 @@ pub fn field_band_conditioned(
     c.flip = flip;
     c.notes = notes;
     c.cells = frame.n;
-    if opts.condition.field != FieldKind::Distance {
+    if opts.condition.field == FieldKind::Redistance {
+        c.notes.push(
+            "a field is not re-distanced (its grid is never built): read as a distance".to_string(),
+        );
+    }
+    if opts.condition.field == FieldKind::Auto {
         // 2. Windows at the full resolution around the probe's zero set, spread by a hash.
         let h: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]) / res as f64);
         let below = |v: f64| (v < level) != flip;
@@ -181,6 +186,12 @@ pub fn field_band_conditioned(
             });
         }
         classify(&mut c, &windows, &scan.value_range());
+        if c.needs_whole_grid() {
+            c.notes.push(
+                "a field is not re-distanced (its grid is never built): read value by value"
+                    .to_string(),
+            );
+        }
     }
     c.time = started.elapsed();
     // 3. The octree on the conditioned values, widened while the slopes exceed its bound.

@@ -12,6 +12,10 @@ use ponq_mesh::io::npy;
 use crate::frame::Frame;
 use crate::reconstruct::{InferOptions, band_memory_limit, band_parameters};
 
+/// The largest grid re-distanced whole (`ponq_data::condition::Kind::Redistanced`): 2^25
+/// nodes, 257 MB of values.
+const WHOLE_GRID_NODES: usize = 1 << 25;
+
 /// A grid read near its surface, and how its values were read.
 pub struct GridInput {
     /// The distances near the surface, in the normalised frame.
@@ -46,7 +50,25 @@ pub fn read_grid(
     .with_context(context)?;
     let scan = scan.with_context(|| format!("the grid {} has no plane", path.display()))?;
     let frame = Frame::of_dims(dims, opts.bounds).with_context(context)?;
-    let c = scan.finish(frame.scale()).with_context(context)?;
+    let mut c = scan.finish(frame.scale()).with_context(context)?;
+    if c.needs_whole_grid() {
+        let nodes = dims.iter().product::<usize>();
+        if nodes <= WHOLE_GRID_NODES {
+            // Re-distanced: the whole grid, once (a grid this size fits).
+            let g = npy::read_npy_grid(path).with_context(context)?;
+            let values = c.condition_dense(&g.data, g.dims).with_context(context)?;
+            let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
+            let band =
+                BandGrid::from_dense(g.dims, &values, 1.0, t, reach).with_context(context)?;
+            return Ok(GridInput {
+                band,
+                conditioning: c,
+            });
+        }
+        c.notes.push(format!(
+            "a grid of {nodes} nodes is too large to re-distance: read value by value"
+        ));
+    }
     // Pass 2: the distances near the surface. The band may take half of what is free; the
     // rest is for the network and the meshing (checked again before the network runs).
     let (t, reach) = band_parameters(frame.n, encoder_layers, opts);

@@ -38,6 +38,6 @@ pub mod tiles;
 pub use frame::Frame;
 pub use reconstruct::{
     InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, band_parameters,
-    finish, infer, predict, predict_band,
+    finish, infer, keep_closer, predict, predict_band, retry_redistanced,
 };
 pub use tiles::{predict_cells, predict_tiled};

@@ -211,6 +211,22 @@ pub struct Inference {
     pub refinement: RefineReport,
     /// How the grid's values were read (when [`predict`] conditioned them).
     pub conditioning: Option<Conditioning>,
+    /// For a grid whose values were conditioned (not used as they are): how well the mesh and
+    /// the field's zero set cover each other, the smaller of the share of the mesh's vertices
+    /// within a cell of the zero set (trilinear in the conditioned grid) and the share of the
+    /// zero set's crossings along grid edges within a cell and a half of a vertex. A reading
+    /// gone wrong puts the mesh elsewhere, or on a part of the surface only:
+    /// [`Inference::strays`] says so.
+    pub surface_agreement: Option<f64>,
+}
+
+impl Inference {
+    /// Whether the mesh strays from the field's zero set ([`Inference::surface_agreement`]
+    /// below 90%): the conditioning misread the field, and exact distances to its zero set
+    /// (`FieldKind::Redistance`) are the safer reading.
+    pub fn strays(&self) -> bool {
+        self.surface_agreement.is_some_and(|a| a < 0.9)
+    }
 }
 
 /// The network's PoNQ on a grid, before any merging: what [`predict`] returns and
@@ -278,6 +294,70 @@ pub fn band_memory_limit() -> Result<Option<usize>> {
     Ok(ponq_mesh::memory::available_bytes()?.map(|b| usize::try_from(b / 2).unwrap_or(usize::MAX)))
 }
 
+/// [`Inference::surface_agreement`] of `mesh` (normalised frame) and the band (cell `h`).
+fn agreement(mesh: &TriMesh, band: &BandGrid, h: f64) -> f64 {
+    if mesh.vertices.is_empty() {
+        return 0.0;
+    }
+    let dims = band.dims();
+    let near = mesh
+        .vertices
+        .iter()
+        .filter(|v| {
+            let x: [f64; 3] =
+                std::array::from_fn(|a| ((v[a] + 1.0) / h).clamp(0.0, (dims[a] - 1) as f64));
+            let i: [usize; 3] =
+                std::array::from_fn(|a| (x[a].floor() as usize).min(dims[a].saturating_sub(2)));
+            let t: [f64; 3] = std::array::from_fn(|a| x[a] - i[a] as f64);
+            let mut val = 0.0;
+            for c in 0..8 {
+                let o = [c >> 2, (c >> 1) & 1, c & 1];
+                let w: f64 = (0..3)
+                    .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
+                    .product();
+                let idx: [usize; 3] = std::array::from_fn(|a| (i[a] + o[a]).min(dims[a] - 1));
+                val += w * band.get(idx[0], idx[1], idx[2]);
+            }
+            val.abs() < h
+        })
+        .count();
+    let precision = near as f64 / mesh.vertices.len() as f64;
+    // And the other way: the zero set's crossings along grid edges with a vertex of the mesh
+    // within a cell and a half (a mesh that keeps close to a part of the surface only).
+    let Some(index) = ponq_mesh::nn::PointIndex::new(&mesh.vertices) else {
+        return 0.0;
+    };
+    let mut crossings: Vec<[f64; 3]> = Vec::new();
+    band.for_each_stored(|i, j, k, v| {
+        for (a, (x, y, z)) in [(i + 1, j, k), (i, j + 1, k), (i, j, k + 1)]
+            .into_iter()
+            .enumerate()
+        {
+            if x >= dims[0] || y >= dims[1] || z >= dims[2] {
+                continue;
+            }
+            let w = band.get(x, y, z);
+            if (v < 0.0) != (w < 0.0) {
+                let t = v / (v - w);
+                let mut p = [i, j, k].map(|c| -1.0 + c as f64 * h);
+                p[a] += t * h;
+                crossings.push(p);
+            }
+        }
+    });
+    if crossings.is_empty() {
+        return precision;
+    }
+    let step = crossings.len().div_ceil(50_000);
+    let reach = (1.5 * h) * (1.5 * h);
+    let (mut hit, mut all) = (0usize, 0usize);
+    for p in crossings.iter().step_by(step) {
+        all += 1;
+        hit += usize::from(index.nearest(p).1 <= reach);
+    }
+    precision.min(hit as f64 / all as f64)
+}
+
 /// A cell can be kept when all its corners are closer than this (normalised frame) to the
 /// surface.
 fn close_threshold(n: usize) -> f64 {
@@ -326,14 +406,22 @@ pub fn predict(
         reach,
     )?
     .with_limit(band_memory_limit()?);
-    let mut mapped = Vec::new();
-    for p in grid.data.chunks(plane.max(1)) {
-        if identity {
+    if conditioning.needs_whole_grid() {
+        // Re-distanced: the whole grid at once.
+        let values = conditioning.condition_dense(&grid.data, grid.dims)?;
+        for p in values.chunks(plane.max(1)) {
             b.push_plane(p)?;
-        } else {
-            mapped.clear();
-            mapped.extend(p.iter().map(|&v| conditioning.apply(v)));
-            b.push_plane(&mapped)?;
+        }
+    } else {
+        let mut mapped = Vec::new();
+        for p in grid.data.chunks(plane.max(1)) {
+            if identity {
+                b.push_plane(p)?;
+            } else {
+                mapped.clear();
+                mapped.extend(p.iter().map(|&v| conditioning.apply(v)));
+                b.push_plane(&mapped)?;
+            }
         }
     }
     let band = b.finish()?;
@@ -448,16 +536,64 @@ pub fn predict_band(
 
 /// Reconstructs a mesh from an SDF grid (negative inside) with a trained network:
 /// [`predict`], then [`finish`].
+///
+/// When the grid's values were conditioned and the mesh strays from their zero set
+/// ([`Inference::strays`]), the grid is read again as exact distances to its zero set
+/// (`FieldKind::Redistance`) and the mesh that keeps closer to it is returned (a note in its
+/// conditioning says so).
 pub fn infer(
     net: &PonqNet,
     encoder_layers: usize,
     grid: &Grid3,
     opts: &InferOptions,
     device: &Device,
-    progress: impl FnMut(usize, usize),
+    mut progress: impl FnMut(usize, usize),
 ) -> Result<Inference> {
-    let p = predict(net, encoder_layers, grid, opts, device, progress)?;
-    finish(&p, opts)
+    let p = predict(net, encoder_layers, grid, opts, device, &mut progress)?;
+    let first = finish(&p, opts)?;
+    if !retry_redistanced(&first, opts) {
+        return Ok(first);
+    }
+    drop(p);
+    let mut o2 = opts.clone();
+    o2.condition.field = ponq_data::condition::FieldKind::Redistance;
+    let p2 = predict(net, encoder_layers, grid, &o2, device, &mut progress)?;
+    let second = finish(&p2, &o2)?;
+    Ok(keep_closer(first, second))
+}
+
+/// Whether a result is worth a second reading as exact distances to the zero set: its mesh
+/// strays from the zero set, its field was measured (not given as a distance), and not
+/// already re-distanced.
+pub fn retry_redistanced(res: &Inference, opts: &InferOptions) -> bool {
+    res.strays()
+        && opts.condition.field == ponq_data::condition::FieldKind::Auto
+        && !res
+            .conditioning
+            .as_ref()
+            .is_some_and(|c| c.needs_whole_grid())
+}
+
+/// Of a first result that strayed and a second, re-distanced one, the one whose mesh keeps
+/// closer to the field's zero set, with a note.
+pub fn keep_closer(first: Inference, mut second: Inference) -> Inference {
+    let (a, b) = (
+        first.surface_agreement.unwrap_or(0.0),
+        second.surface_agreement.unwrap_or(0.0),
+    );
+    if b >= a && !second.mesh.faces.is_empty() {
+        if let Some(c) = second.conditioning.as_mut() {
+            c.notes.push(format!(
+                "read value by value, the mesh strayed from the field's zero set ({:.0}% of \
+                 its vertices within a cell of it; re-distanced: {:.0}%)",
+                100.0 * a,
+                100.0 * b
+            ));
+        }
+        second
+    } else {
+        first
+    }
 }
 
 /// The PoNQ that is meshed: PoNQ-lite / hierarchy / merged smooth cells, per `opts`, and
@@ -593,6 +729,11 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
     } else if wanted && opts.open.is_some() {
         refinement.note = Some("refinement is for closed surfaces: not run with --open".into());
     }
+    let surface_agreement = p
+        .conditioning
+        .as_ref()
+        .filter(|c| !c.is_identity())
+        .map(|_| agreement(&mesh, &p.normalised, 2.0 / frame.n as f64));
     let mesh = if frame.is_identity() {
         mesh
     } else {
@@ -614,6 +755,7 @@ pub fn finish(p: &Predicted, opts: &InferOptions) -> Result<Inference> {
         tiles: p.tiles,
         kept_cells: p.kept_cells,
         conditioning: p.conditioning.clone(),
+        surface_agreement,
         message,
         refinement,
     })

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
 use burn::prelude::Device;
-use ponq_infer::{Frame, finish, predict};
+use ponq_infer::{Frame, infer as infer_grid};
 use ponq_mesh::validity;
 use ponq_model::{PonqNet, PonqNetConfig};
 use pyo3::prelude::*;
@@ -131,8 +131,7 @@ pub(crate) fn infer<'py>(
         Frame::of(&grid, opts.bounds).map_err(|e| Failure::Value(format!("{e:#}")))?;
         let dev = ponq_model::backend::cpu();
         let (net, cfg) = network(model.as_deref(), &dev)?;
-        let p = predict(&net, cfg.encoder_layers, &grid, &opts, &dev, |_, _| {})?;
-        let res = finish(&p, &opts)?;
+        let res = infer_grid(&net, cfg.encoder_layers, &grid, &opts, &dev, |_, _| {})?;
         let report = (check && !res.mesh.faces.is_empty()).then(|| validity::check(&res.mesh));
         Ok((res, report))
     })?;

@@ -40,10 +40,12 @@
 
 mod crossings;
 mod fit;
+mod redistance;
 mod scan;
 
 pub use crossings::{Crossing, crossings, pairs};
 pub use fit::{MonotoneMap, fit_linear, fit_monotone};
+pub use redistance::redistance;
 pub use scan::{FieldScan, ValueRange, Window, classify};
 
 use std::time::Duration;
@@ -81,6 +83,8 @@ pub enum FieldKind {
     /// Signed distances in the units of the grid's bounds: used as they are (after the level
     /// and the sign).
     Distance,
+    /// Any field: exact distances to its zero set ([`Kind::Redistanced`]).
+    Redistance,
 }
 
 impl std::str::FromStr for FieldKind {
@@ -89,7 +93,8 @@ impl std::str::FromStr for FieldKind {
         match s {
             "auto" => Ok(Self::Auto),
             "distance" => Ok(Self::Distance),
-            _ => Err(format!("expected auto or distance, got {s:?}")),
+            "redistance" => Ok(Self::Redistance),
+            _ => Err(format!("expected auto, distance or redistance, got {s:?}")),
         }
     }
 }
@@ -126,7 +131,20 @@ pub enum Kind {
         /// Pairs it was fitted to.
         pairs: usize,
     },
+    /// A field no map explains (or too few nodes could tell): exact distances to its zero
+    /// set ([`redistance`]), which needs the whole grid ([`Conditioning::condition_dense`]);
+    /// value by value ([`Conditioning::apply`]) it falls back to `factor`.
+    Redistanced {
+        /// Why no map explains it.
+        why: String,
+        /// The factor of a per-value reading (the slope at the zero set).
+        factor: f64,
+    },
 }
+
+/// How far from the zero set [`redistance`] computes exact distances, in cells (past what
+/// inference reads).
+pub const REDISTANCE_CELLS: f64 = 10.0;
 
 /// The conditioning of one field: level, sign and kind, and how to apply them.
 #[derive(Debug, Clone)]
@@ -179,10 +197,51 @@ impl Conditioning {
         } else {
             v - self.level
         };
+        self.apply_u(u)
+    }
+
+    /// [`Conditioning::apply`] of a value after the level and the sign.
+    pub fn apply_u(&self, u: f64) -> f64 {
         match &self.kind {
             Kind::Distance => u * self.frame_scale,
-            Kind::Scaled { factor } => u * factor,
+            Kind::Scaled { factor } | Kind::Redistanced { factor, .. } => u * factor,
             Kind::Mapped { map, .. } => map.eval(u),
+        }
+    }
+
+    /// Whether the whole grid is needed ([`Conditioning::condition_dense`]): a field to
+    /// re-distance.
+    pub fn needs_whole_grid(&self) -> bool {
+        matches!(self.kind, Kind::Redistanced { .. })
+    }
+
+    /// The conditioned values of a whole grid (`dims` nodes, C order): [`Conditioning::apply`]
+    /// at every node, or the distances to its zero set ([`Kind::Redistanced`]).
+    ///
+    /// # Errors
+    /// A grid of another size; the errors of [`redistance`].
+    pub fn condition_dense(&self, raw: &[f64], dims: [usize; 3]) -> crate::Result<Vec<f64>> {
+        if raw.len() != dims.iter().product::<usize>() {
+            return Err(crate::DataError::Invalid(format!(
+                "{} values for a grid of {dims:?} nodes",
+                raw.len()
+            )));
+        }
+        match &self.kind {
+            Kind::Redistanced { .. } => {
+                let u: Vec<f64> = raw
+                    .iter()
+                    .map(|&v| {
+                        if self.flip {
+                            self.level - v
+                        } else {
+                            v - self.level
+                        }
+                    })
+                    .collect();
+                redistance(&u, dims, 2.0 / self.cells.max(1) as f64, REDISTANCE_CELLS)
+            }
+            _ => Ok(raw.iter().map(|&v| self.apply(v)).collect()),
         }
     }
 
@@ -200,6 +259,7 @@ impl Conditioning {
                 let h = 2.0 / self.cells.max(1) as f64;
                 Some(*residual_cells <= 0.1 && map.has_slope_at_zero(h))
             }
+            Kind::Redistanced { .. } => Some(false),
             _ => None,
         }
     }
@@ -228,6 +288,10 @@ impl Conditioning {
                 "not a distance (slope {:.4} per unit at the surface): mapped to distances by a \
                  monotone fit on {pairs} nodes (median error {residual_cells:.3} cells)",
                 self.slope
+            ),
+            Kind::Redistanced { why, .. } => format!(
+                "{why}: re-distanced (exact distances to its zero set as marching cubes places \
+                 it)"
             ),
         });
         let mut s = format!(

@@ -337,8 +337,15 @@ impl FieldScan {
             cells,
             notes,
         };
-        if self.opts.field != FieldKind::Distance {
-            classify(&mut c, &windows, &self.value_range());
+        match self.opts.field {
+            FieldKind::Auto => classify(&mut c, &windows, &self.value_range()),
+            FieldKind::Distance => {}
+            FieldKind::Redistance => {
+                c.kind = Kind::Redistanced {
+                    why: "asked (--field redistance)".into(),
+                    factor: frame_scale,
+                }
+            }
         }
         c.time = self.started.elapsed();
         Ok(c)
@@ -419,11 +426,31 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
         first = analyse(&|u| u, MAX_TRIED);
     }
     let Some((slope, linear)) = fit_linear(&first, h) else {
-        c.notes.push(format!(
-            "too few nodes near flat pieces of the surface to measure the field ({} pairs): \
-             taken as a signed distance",
-            first.len()
-        ));
+        // Too few flat pieces (a small or thin shape): the field's slope across the edges
+        // that cross its zero set (a distance changes by a cell along edges normal to the
+        // surface, and by less along the others: their upper tenth).
+        let Some((edge, top)) = edge_slope(windows, h, &u_of) else {
+            c.notes.push(
+                "too few nodes near the surface to measure the field: taken as a signed \
+                 distance"
+                    .to_string(),
+            );
+            return;
+        };
+        c.slope = top * frame_scale;
+        // Noise widens the edges' slopes: only a clear difference (a quarter) rescales, by
+        // the steepest edges (those normal to the surface, exact for a scaled distance).
+        if (edge * frame_scale - 1.0).abs() > 0.25 {
+            c.kind = Kind::Scaled { factor: 1.0 / top };
+            check_distance_like(
+                c,
+                windows,
+                h,
+                &u_of,
+                &clamped,
+                "a field measured on too few flat pieces of its surface",
+            );
+        }
         return;
     };
     c.slope = slope * frame_scale;
@@ -478,6 +505,14 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
             c.kind = Kind::Scaled {
                 factor: 1.0 / slope,
             };
+            check_distance_like(
+                c,
+                windows,
+                h,
+                &u_of,
+                &clamped,
+                "a field that is not a distance up to a unit",
+            );
         }
         return;
     }
@@ -506,10 +541,174 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
             err / h
         ));
     }
+    if map.power() > 1.0 {
+        // A field whose slope vanishes at its surface (d |d|): its zero set falls between
+        // nodes where no reading of its values places it; the map still reads its values far
+        // from it, but the surface is marching cubes' either way.
+        c.kind = Kind::Redistanced {
+            why: format!(
+                "a field whose slope vanishes at its surface (it grows as the distance to the \
+                 power {:.1})",
+                map.power()
+            ),
+            factor: 1.0 / slope,
+        };
+        return;
+    }
     c.kind = Kind::Mapped {
         map,
         residual_cells: err / h,
         pairs: count,
+    };
+    check_distance_like(
+        c,
+        windows,
+        h,
+        &u_of,
+        &clamped,
+        "a field no monotone map explains",
+    );
+}
+
+/// The 90th and 99th percentiles of `|u(b) - u(a)| / h` over the grid edges that cross the
+/// zero set: a distance's slope times the field's (edges normal to the surface change by a
+/// cell); `None` without 20 such edges.
+fn edge_slope(windows: &[Window], h: f64, u_of: &dyn Fn(f32) -> f64) -> Option<(f64, f64)> {
+    let mut slopes = Vec::new();
+    for w in windows {
+        let [d0, d1, d2] = w.dims;
+        let at = |i: usize, j: usize, k: usize| u_of(w.data[(i * d1 + j) * d2 + k]);
+        for i in 0..d0 {
+            for j in 0..d1 {
+                for k in 0..d2 {
+                    let a = at(i, j, k);
+                    for (x, y, z) in [(i + 1, j, k), (i, j + 1, k), (i, j, k + 1)] {
+                        if x >= d0 || y >= d1 || z >= d2 {
+                            continue;
+                        }
+                        let b = at(x, y, z);
+                        if (a < 0.0) != (b < 0.0) {
+                            slopes.push((b - a).abs() / h);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if slopes.len() < 20 {
+        return None;
+    }
+    let n = slopes.len();
+    let v90 = *slopes.select_nth_unstable_by(n * 9 / 10, f64::total_cmp).1;
+    let v99 = *slopes
+        .select_nth_unstable_by(n * 99 / 100, f64::total_cmp)
+        .1;
+    (v90 > 0.0 && v99.is_finite()).then_some((v90, v99))
+}
+
+/// Checks that `c`'s reading of the windows is a distance where it matters: between one and
+/// three cells from the surface, the steepest descent towards the surface over each node's
+/// 5^3 block falls at a median rate within 15% of one, and at half of the nodes within 20%;
+/// across the surface, the distances of the two nodes of an edge that crosses it add up to a
+/// cell (within 12%, the upper twentieth of the edges: those normal to the surface). A reading
+/// that fails is no distance the network can use: the field is re-distanced instead
+/// ([`Kind::Redistanced`], `why` says what it was).
+fn check_distance_like(
+    c: &mut Conditioning,
+    windows: &[Window],
+    h: f64,
+    u_of: &dyn Fn(f32) -> f64,
+    clamped: &dyn Fn(f32) -> bool,
+    why: &str,
+) {
+    let mut rates: Vec<f64> = Vec::new();
+    for w in windows {
+        let [d0, d1, d2] = w.dims;
+        let v: Vec<f64> = w.data.iter().map(|&x| c.apply_u(u_of(x))).collect();
+        let at = |i: usize, j: usize, k: usize| (i * d1 + j) * d2 + k;
+        for i in 2..d0.saturating_sub(2) {
+            for j in 2..d1.saturating_sub(2) {
+                for k in 2..d2.saturating_sub(2) {
+                    let f = at(i, j, k);
+                    let x = v[f];
+                    if !(x.abs() > h && x.abs() < 3.0 * h) || clamped(w.data[f]) {
+                        continue;
+                    }
+                    let mut best = f64::NEG_INFINITY;
+                    for a in 0..5 {
+                        for b in 0..5 {
+                            for e in 0..5 {
+                                if (a, b, e) == (2, 2, 2) {
+                                    continue;
+                                }
+                                let y = v[at(i + a - 2, j + b - 2, k + e - 2)];
+                                let len = ((a as f64 - 2.0).powi(2)
+                                    + (b as f64 - 2.0).powi(2)
+                                    + (e as f64 - 2.0).powi(2))
+                                .sqrt()
+                                    * h;
+                                best = best.max(x.signum() * (x - y) / len);
+                            }
+                        }
+                    }
+                    rates.push(best);
+                }
+            }
+        }
+    }
+    // Across the zero set: the nodes of an edge that crosses it are a cell apart along the
+    // edge, so their distances add up to at most a cell, and to a cell on edges normal to the
+    // surface (the upper twentieth of them).
+    let mut spans: Vec<f64> = Vec::new();
+    for w in windows {
+        let [d0, d1, d2] = w.dims;
+        let v = |i: usize, j: usize, k: usize| c.apply_u(u_of(w.data[(i * d1 + j) * d2 + k]));
+        for i in 0..d0 {
+            for j in 0..d1 {
+                for k in 0..d2 {
+                    let a = v(i, j, k);
+                    for (x, y, z) in [(i + 1, j, k), (i, j + 1, k), (i, j, k + 1)] {
+                        if x < d0 && y < d1 && z < d2 {
+                            let b = v(x, y, z);
+                            if (a < 0.0) != (b < 0.0) {
+                                spans.push((a.abs() + b.abs()) / h);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let span = if spans.len() >= 20 {
+        let n = spans.len();
+        *spans.select_nth_unstable_by(n * 19 / 20, f64::total_cmp).1
+    } else {
+        1.0
+    };
+    let near_one = rates.iter().filter(|r| (**r - 1.0).abs() <= 0.2).count();
+    let m = if rates.len() >= 20 {
+        median(&mut rates)
+    } else {
+        1.0
+    };
+    if (m - 1.0).abs() <= 0.15
+        && (rates.len() < 20 || near_one * 2 >= rates.len())
+        && (span - 1.0).abs() <= 0.12
+    {
+        return;
+    }
+    let factor = match &c.kind {
+        Kind::Scaled { factor } => *factor,
+        _ if c.slope.is_finite() && c.slope > 0.0 => c.frame_scale / c.slope,
+        _ => c.frame_scale,
+    };
+    c.notes.push(format!(
+        "read value by value its distances would fall at a median rate of {m:.2} and span \
+         {span:.2} cells across its zero set's edges (a distance: 1 and 1)"
+    ));
+    c.kind = Kind::Redistanced {
+        why: why.to_string(),
+        factor,
     };
 }
 

@@ -80,7 +80,10 @@ struct Args {
     /// that a distance in other units (voxels, millimetres, a normalised TSDF) is rescaled and
     /// a monotone function of a distance (occupancy, tanh, sigmoid) is mapped back to one,
     /// while a true signed distance in the units of --bounds is used as it is; distance: take
-    /// the values as such distances without measuring.
+    /// the values as such distances without measuring; redistance: take exact distances to
+    /// the field's zero set as marching cubes places it (any field; the surface is then
+    /// marching cubes', sharpened by the network). auto falls back to redistance when the
+    /// mesh strays from the field's zero set.
     #[arg(long, value_name = "KIND", default_value = "auto")]
     field: ponq_data::condition::FieldKind,
     /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
@@ -438,6 +441,27 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     drop(predicted);
     sp.finish_and_clear();
     let mut res = res?;
+    if !mesh_input && ponq_infer::retry_redistanced(&res, &opts) {
+        // The mesh strayed from the field's zero set: read the grid again as exact distances
+        // to it, and keep the mesh that keeps closer.
+        let mut o2 = opts.clone();
+        o2.condition.field = ponq_data::condition::FieldKind::Redistance;
+        let sp = spinner(args.quiet, "re-distancing and meshing again");
+        let g2 = ponq_infer::grid_input::read_grid(
+            &args.input,
+            net_cfg.encoder_layers,
+            &o2,
+            |_, _, _| {},
+        )?;
+        if g2.conditioning.needs_whole_grid() {
+            let mut p2 = predict_band(&net, net_cfg.encoder_layers, g2.band, &o2, &dev, |_, _| {})?;
+            p2.conditioning = Some(g2.conditioning);
+            let r2 = finish(&p2, &o2)?;
+            res = ponq_infer::keep_closer(res, r2);
+            conditioning = res.conditioning.clone();
+        }
+        sp.finish_and_clear();
+    }
     if res.mesh.faces.is_empty() {
         // The field has a sign change, yet nothing came out: never a silent empty file.
         eprintln!(
@@ -511,7 +535,14 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             res.mesh.faces.len()
         );
         if let Some(c) = &conditioning {
-            println!("{}", c.summary());
+            match res.surface_agreement {
+                Some(a) => println!(
+                    "{}; the mesh and the field's zero set cover each other to {:.1}%",
+                    c.summary(),
+                    100.0 * a
+                ),
+                None => println!("{}", c.summary()),
+            }
         }
         if let Some(m) = &res.message {
             println!("note: {m}");

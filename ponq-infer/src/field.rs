@@ -239,8 +239,9 @@ pub fn field_band(
 }
 
 /// One pass of the octree over the field's conditioned values (`map` of the raw values):
-/// the band, and the steepest slope seen between neighbouring nodes of the evaluated bricks
-/// whose values are within 4 cells of the surface (normalised units per normalised length).
+/// the band, and the slope seen between neighbouring nodes of the evaluated bricks whose
+/// values are within 4 cells of the surface (normalised units per normalised length; the
+/// 99.9th percentile).
 #[allow(clippy::type_complexity)]
 fn octree_band(
     res: usize,
@@ -408,7 +409,10 @@ fn octree_band(
     // The steepest slope between neighbours of the evaluated bricks near the surface.
     let cell = 2.0 / frame.n as f64;
     let near = 4.0 * cell;
-    let mut seen = 0.0f64;
+    // A histogram of the slopes (hundredths up to 20; past that, the last bin), so that a few
+    // spikes of a learned field do not widen the bound for all of it: the 99.9th percentile.
+    const BINS: usize = 2001;
+    let mut hist = vec![0u64; BINS];
     for (b, v) in &bricks {
         let base = [b / (nb * nb), (b / nb) % nb, b % nb].map(|c| c * BRICK);
         // Nodes of the brick inside the grid (the rest is padding).
@@ -424,11 +428,22 @@ fn octree_band(
                         }
                         let b = v[(x2 * BRICK + y2) * BRICK + z2];
                         if a.abs() < near || b.abs() < near {
-                            seen = seen.max((a - b).abs() / cell);
+                            let slope = (a - b).abs() / cell;
+                            hist[((slope * 100.0) as usize).min(BINS - 1)] += 1;
                         }
                     }
                 }
             }
+        }
+    }
+    let total: u64 = hist.iter().sum();
+    let mut seen = 0.0;
+    let mut acc = 0u64;
+    for (i, &n) in hist.iter().enumerate() {
+        acc += n;
+        if acc * 1000 >= total * 999 {
+            seen = (i + 1) as f64 / 100.0;
+            break;
         }
     }
     let grid = BandGrid::from_bricks(dims, t, reach, bricks, |b| negative[b])?;

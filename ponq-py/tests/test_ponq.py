@@ -518,6 +518,73 @@ def test_infer_field_takes_a_torch_module():
     assert stats["points"] < stats["dense_points"]
 
 
+def _grid_of(f, res):
+    lo, h = -1.0, 2.0 / res
+    ax = lo + np.arange(res + 1) * h
+    pts = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+    return f(pts).reshape(res + 1, res + 1, res + 1)
+
+
+def test_infer_reads_fields_in_other_conventions():
+    res = 40
+    h = 2.0 / res
+    d = _grid_of(_box_sphere, res)
+    v, f = ponq.infer(d)
+    # Inside positive: the same values once the sign is flipped, the same mesh, with a note.
+    with pytest.warns(UserWarning, match="sign flipped"):
+        vp, fp = ponq.infer(-d)
+    assert np.array_equal(v, vp) and np.array_equal(f, fp)
+    # inside= says it without a note.
+    vp, fp = ponq.infer(-d, inside="positive")
+    assert np.array_equal(v, vp)
+    # Voxel units, a normalised TSDF, an occupancy (level 0.5, inside high, with a note), a
+    # surface at another level: the exact grid's surface.
+    cases = [
+        (d / h, {}),
+        (np.clip(d / (4 * h), -1, 1), {}),
+        (d + 0.3, {"level": 0.3}),
+    ]
+    # (F1 is sampled: a mesh against itself scores below 1; that is the mark.)
+    itself = ponq.metrics(v, f, v, f)["f1"]
+    for grid, kw in cases:
+        vg, fg = ponq.infer(grid, **kw)
+        assert ponq.check(vg, fg)["valid"]
+        assert ponq.metrics(vg, fg, v, f)["f1"] > itself - 0.02, kw
+    with pytest.warns(UserWarning, match="level 0.5"):
+        vo, fo = ponq.infer(1.0 / (1.0 + np.exp(d / h)))
+    assert ponq.metrics(vo, fo, v, f)["f1"] > itself - 0.05
+    # What cannot be told is a ValueError that says what to give.
+    with pytest.raises(ValueError, match="both sides of the level"):
+        ponq.infer(_grid_of(lambda p: p[:, 0] - 0.1, 16))
+    ponq.infer(_grid_of(lambda p: p[:, 0] - 0.1, 16), inside="negative")
+    with pytest.raises(ValueError, match="invalid value 'outside' for inside"):
+        ponq.infer(d, inside="outside")
+    with pytest.raises(ValueError, match="invalid value 'occupancy' for field"):
+        ponq.infer(d, field="occupancy")
+
+
+def test_infer_field_of_an_mlp_in_voxel_units():
+    """A small MLP fitted to the box-and-sphere (one hidden layer of 512 tanh units, its
+    output layer by least squares), evaluated in voxel units: infer_field measures the unit
+    from its first evaluations and meshes what the dense grid of the same field gives."""
+    rng = np.random.default_rng(0)
+    w = rng.normal(0.0, 3.0, (3, 512))
+    b = rng.uniform(-3.0, 3.0, 512)
+    x = rng.uniform(-1.0, 1.0, (30000, 3))
+    feats = lambda p: np.tanh(p @ w + b)
+    coef, *_ = np.linalg.lstsq(feats(x), _box_sphere(x), rcond=None)
+    res = 96
+    h = 2.0 / res
+    mlp = lambda p: feats(np.asarray(p)) @ coef / h
+    v, f, stats = ponq.infer_field(mlp, res)
+    assert "rescaled" in stats["field"], stats["field"]
+    vd, fd = ponq.infer(_grid_of(mlp, res))
+    assert ponq.check(v, f)["valid"] and ponq.check(vd, fd)["valid"]
+    # (F1 is sampled: a mesh against itself scores below 1; that is the mark.)
+    assert ponq.metrics(v, f, vd, fd)["f1"] > ponq.metrics(vd, fd, vd, fd)["f1"] - 0.02
+    assert stats["points"] < stats["dense_points"]
+
+
 def _dataset(tmp_path, count=20):
     """`count` meshes (the shared evaluation meshes where they are, else copies of the
     examples) and one broken file, in a folder."""

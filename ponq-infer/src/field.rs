@@ -130,20 +130,37 @@ pub fn field_band_conditioned(
     for plane in probe.chunks(pn * pn) {
         scan.push_plane(plane)?;
     }
-    let (level, flip, notes) = scan.level_and_sign()?;
     let mut c = Conditioning::identity(frame.scale());
-    c.level = level;
-    c.flip = flip;
-    c.notes = notes;
     c.cells = frame.n;
+    let mut probed = true;
+    match scan.level_and_sign() {
+        Ok((level, flip, notes)) => {
+            c.level = level;
+            c.flip = flip;
+            c.notes = notes;
+        }
+        Err(e) if e.to_string().contains("no sign change") => {
+            // A surface smaller than the probe's cells: the octree (on the field as a
+            // distance at the given level) still finds it; too little was seen to measure.
+            probed = false;
+            c.level = opts.condition.level.unwrap_or(0.0);
+            c.flip = opts.condition.inside == ponq_data::condition::Inside::Positive;
+            c.notes.push(
+                "the probe grid saw no sign change: read as a signed distance at the level"
+                    .to_string(),
+            );
+        }
+        Err(e) => return Err(e.into()),
+    }
     if opts.condition.field == FieldKind::Redistance {
         c.notes.push(
             "a field is not re-distanced (its grid is never built): read as a distance".to_string(),
         );
     }
-    if opts.condition.field == FieldKind::Auto {
+    if opts.condition.field == FieldKind::Auto && probed {
         // 2. Windows at the full resolution around the probe's zero set, spread by a hash.
         let h: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]) / res as f64);
+        let (level, flip) = (c.level, c.flip);
         let below = |v: f64| (v < level) != flip;
         let mut centres: Vec<(u64, [usize; 3])> = Vec::new();
         for i in 0..pr {
@@ -242,7 +259,7 @@ pub fn field_band(
 /// the band, and the slope seen between neighbouring nodes of the evaluated bricks whose
 /// values are within 4 cells of the surface (normalised units per normalised length; the
 /// 99.9th percentile).
-#[allow(clippy::type_complexity)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn octree_band(
     res: usize,
     encoder_layers: usize,

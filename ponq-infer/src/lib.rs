@@ -38,6 +38,6 @@ pub mod tiles;
 pub use frame::Frame;
 pub use reconstruct::{
     InferOptions, InferTimes, Inference, Predicted, RefineMode, RefineReport, band_parameters,
-    finish, infer, keep_closer, predict, predict_band, retry_redistanced,
+    finish, infer, keep_closer, predict, predict_band, retry_redistanced, with_note,
 };
 pub use tiles::{predict_cells, predict_tiled};

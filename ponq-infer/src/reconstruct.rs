@@ -395,7 +395,8 @@ pub fn predict(
     for p in grid.data.chunks(plane.max(1)) {
         scan.push_plane(p)?;
     }
-    let conditioning = scan.finish(frame.scale())?;
+    let mut conditioning = scan.finish(frame.scale())?;
+    conditioning.fit_whole_grid(grid.data.len());
     let (t, reach) = band_parameters(frame.n, encoder_layers, opts);
     // Priced plane by plane as it is built (a grid whose surface fills it stores it all).
     let identity = conditioning.is_identity();
@@ -407,7 +408,12 @@ pub fn predict(
     )?
     .with_limit(band_memory_limit()?);
     if conditioning.needs_whole_grid() {
-        // Re-distanced: the whole grid at once.
+        // Re-distanced: the whole grid at once (two copies of it, and its marching cubes).
+        ponq_mesh::memory::check(
+            grid.data.len() as u64 * 24,
+            "re-distancing the whole grid",
+            "give the field's convention (--field distance) or mesh a coarser grid",
+        )?;
         let values = conditioning.condition_dense(&grid.data, grid.dims)?;
         for p in values.chunks(plane.max(1)) {
             b.push_plane(p)?;
@@ -557,9 +563,23 @@ pub fn infer(
     drop(p);
     let mut o2 = opts.clone();
     o2.condition.field = ponq_data::condition::FieldKind::Redistance;
-    let p2 = predict(net, encoder_layers, grid, &o2, device, &mut progress)?;
-    let second = finish(&p2, &o2)?;
-    Ok(keep_closer(first, second))
+    let second = predict(net, encoder_layers, grid, &o2, device, &mut progress)
+        .and_then(|p2| finish(&p2, &o2));
+    Ok(match second {
+        Ok(s) => keep_closer(first, s),
+        Err(e) => with_note(
+            first,
+            format!("reading it again re-distanced failed: {e:#}"),
+        ),
+    })
+}
+
+/// `res` with a note in its conditioning.
+pub fn with_note(mut res: Inference, note: String) -> Inference {
+    if let Some(c) = res.conditioning.as_mut() {
+        c.notes.push(note);
+    }
+    res
 }
 
 /// Whether a result is worth a second reading as exact distances to the zero set: its mesh

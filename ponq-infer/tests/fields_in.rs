@@ -202,3 +202,50 @@ fn unequal_node_counts_take_cubic_cells() {
     }
     std::fs::remove_dir_all(&d).ok();
 }
+
+/// A true signed distance is used as it is: the measured reading gives the same file, byte for
+/// byte, as taking the values as distances without measuring. A hard 0/1 voxel grid (no
+/// distance in it at all) is re-distanced to its zero set: a valid mesh, not the whole grid in
+/// the band.
+#[test]
+fn exact_grids_pass_through_and_binary_voxels_are_redistanced() {
+    let d = tmp("fields-exact");
+    for g in ["examples/csg_sdf_33.npy", "examples/example001_sdf_65.npy"] {
+        let (a, b) = (d.join("auto.obj"), d.join("distance.obj"));
+        let (code, text) = run(&[os(&repo(g)), "-o".as_ref(), os(&a)]);
+        assert_eq!(code, Some(0), "{text}");
+        assert!(text.contains("used as it is"), "{text}");
+        let (code, text) = run(&[
+            os(&repo(g)),
+            "-o".as_ref(),
+            os(&b),
+            "--field".as_ref(),
+            "distance".as_ref(),
+        ]);
+        assert_eq!(code, Some(0), "{text}");
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            std::fs::read(&b).unwrap(),
+            "{g}"
+        );
+    }
+    let (truth, exact) = csg(32);
+    let voxels: Vec<f64> = exact
+        .data
+        .iter()
+        .map(|&v| if v < 0.0 { 1.0 } else { 0.0 })
+        .collect();
+    let p = d.join("voxels.npy");
+    write_npy_grid_f32(&p, &Grid3::new(exact.dims, voxels.clone()).unwrap()).unwrap();
+    let out = d.join("voxels.obj");
+    let (code, text) = run(&[os(&p), "-o".as_ref(), os(&out)]);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("re-distanced"), "{text}");
+    assert!(text.contains("level 0.5"), "{text}");
+    let mesh = io::read_mesh(&out).unwrap();
+    assert!(validity::check(&mesh).is_valid());
+    let signed: Vec<f64> = voxels.iter().map(|v| 0.5 - v).collect();
+    let mc = marching_cubes(&signed, exact.dims, [-1.0; 3], [1.0; 3]).unwrap();
+    assert!(f1(&mesh, &truth) >= f1(&mc, &truth) - 0.02, "{text}");
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -25,6 +25,7 @@ pub mod band;
 pub mod bvh;
 pub mod caps;
 pub mod cli;
+pub mod colour;
 pub mod complex;
 pub mod corners;
 pub mod cover_grid;

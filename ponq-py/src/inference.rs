@@ -64,8 +64,10 @@ pub(crate) fn network(
 ///         without a sign change at 0: an occupancy, with a ``UserWarning``).
 ///     inside: ``"auto"`` (the side the grid's boundary lies on is outside), ``"negative"``
 ///         or ``"positive"``.
-///     field: ``"auto"`` (measured: rescaled or mapped into distances when it is not one) or
-///         ``"distance"`` (the values as distances in the units of ``bounds``).
+///     field: ``"auto"`` (measured: rescaled or mapped into distances when it is not one, or
+///         re-distanced to its zero set), ``"distance"`` (the values as distances in the
+///         units of ``bounds``) or ``"redistance"`` (exact distances to its zero set). What
+///         was done when the values are not used as they are comes as a ``UserWarning``.
 ///     model: path of network weights (a ``.bpk`` file with its ``.json`` config beside it);
 ///         default: the shipped model (``$PONQ_MODEL`` if set). Loaded once and kept.
 ///     lite: PoNQ-lite: one point per cell (fewer vertices, the same sharp features).
@@ -147,14 +149,14 @@ pub(crate) fn infer<'py>(
     tuple(py, out)
 }
 
-/// A `UserWarning` with what the conditioning decided that the caller should hear (a level or
-/// a sign it chose, a loose map), as `ponq-infer` prints it.
+/// A `UserWarning` with what the conditioning did when the values were not used as they are
+/// (the factor, the map, the level or the sign it chose), as `ponq-infer` prints it.
 pub(crate) fn warn_conditioning(
     py: Python<'_>,
     c: Option<&ponq_data::condition::Conditioning>,
 ) -> PyResult<()> {
     if let Some(c) = c
-        && !c.notes.is_empty()
+        && (!c.notes.is_empty() || !c.is_identity())
     {
         warn(py, "UserWarning", &c.summary())?;
     }

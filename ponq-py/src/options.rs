@@ -82,7 +82,16 @@ pub(crate) fn infer_options(
         } else {
             refine
         },
-        condition,
+        condition: ponq_data::condition::ConditionOptions {
+            // An open surface's boundary lies on both sides: signed distances, unless told.
+            inside: match (condition.inside, open) {
+                (ponq_data::condition::Inside::Auto, Some(_)) => {
+                    ponq_data::condition::Inside::Negative
+                }
+                (i, _) => i,
+            },
+            ..condition
+        },
         ..Default::default()
     })
 }

@@ -146,6 +146,15 @@ pub enum Kind {
 /// inference reads).
 pub const REDISTANCE_CELLS: f64 = 10.0;
 
+/// How far clamped values of a truncated field are read at least, in cells (past the band
+/// inference stores, 3 cells, so that a field clamped within it does not store the whole
+/// grid; a TSDF clamped farther keeps its own reading).
+pub const FAR_CELLS: f64 = 3.05;
+
+/// The largest grid re-distanced whole (2^25 nodes, 256 MB of values); larger grids are read
+/// value by value ([`Conditioning::fit_whole_grid`]).
+pub const REDISTANCE_MAX_NODES: usize = 1 << 25;
+
 /// The conditioning of one field: level, sign and kind, and how to apply them.
 #[derive(Debug, Clone)]
 pub struct Conditioning {
@@ -164,6 +173,9 @@ pub struct Conditioning {
     pub time: Duration,
     /// Cells along the grid's longest axis (the normalised cell is `2 / cells`).
     pub cells: usize,
+    /// The field's extreme values where a truncated field clamps many nodes (below, above):
+    /// read at least [`FAR_CELLS`] away.
+    pub clamped: (Option<f64>, Option<f64>),
     /// What was decided that the user should hear (the level or the sign chosen, a fit
     /// that is loose, too few nodes to measure).
     pub notes: Vec<String>,
@@ -180,6 +192,7 @@ impl Conditioning {
             slope: f64::NAN,
             time: Duration::ZERO,
             cells: 0,
+            clamped: (None, None),
             notes: Vec::new(),
         }
     }
@@ -197,7 +210,34 @@ impl Conditioning {
         } else {
             v - self.level
         };
-        self.apply_u(u)
+        let d = self.apply_u(u);
+        if !matches!(self.kind, Kind::Distance)
+            && (Some(v) == self.clamped.0 || Some(v) == self.clamped.1)
+        {
+            // At least past the band inference stores (3 cells), so that a field clamped
+            // within it does not store the whole grid.
+            let far = FAR_CELLS * 2.0 / self.cells.max(1) as f64;
+            return u.signum() * d.abs().max(far);
+        }
+        d
+    }
+
+    /// Keeps a re-distancing within what a grid of `nodes` nodes allows
+    /// ([`REDISTANCE_MAX_NODES`]): past it, the field is read value by value
+    /// ([`Kind::Scaled`] by the factor measured), with a note. Returns whether the kind
+    /// changed.
+    pub fn fit_whole_grid(&mut self, nodes: usize) -> bool {
+        if let Kind::Redistanced { factor, .. } = self.kind
+            && nodes > REDISTANCE_MAX_NODES
+        {
+            self.kind = Kind::Scaled { factor };
+            self.notes.push(format!(
+                "a grid of {nodes} nodes is too large to re-distance (at most \
+                 {REDISTANCE_MAX_NODES}): read value by value"
+            ));
+            return true;
+        }
+        false
     }
 
     /// [`Conditioning::apply`] of a value after the level and the sign.

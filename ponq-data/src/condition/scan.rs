@@ -95,6 +95,12 @@ impl FieldScan {
     /// A plane of another size, past the last one, or with a non-finite value.
     pub fn push_plane(&mut self, plane: &[f64]) -> Result<()> {
         let [d0, d1, d2] = self.dims;
+        if self.dims.contains(&0) {
+            return Err(DataError::Invalid(format!(
+                "an empty grid: {:?} nodes",
+                self.dims
+            )));
+        }
         if plane.len() != d1 * d2 || self.planes >= d0 {
             return Err(DataError::Invalid(format!(
                 "field scan: plane {} of {} values for a grid of {:?} nodes",
@@ -167,7 +173,7 @@ impl FieldScan {
         // The lattice: windows of WINDOW nodes every `stride` nodes along each axis, so that a
         // layer of windows holds a bounded number of values.
         let stride = WINDOW.max(d1.max(d2).div_ceil(12));
-        if i % stride == 0 && i + 1 < d0 {
+        if i.is_multiple_of(stride) && i + 1 < d0 {
             for j in (0..d1.saturating_sub(1)).step_by(stride) {
                 for k in (0..d2.saturating_sub(1)).step_by(stride) {
                     let dims = [WINDOW.min(d0 - i), WINDOW.min(d1 - j), WINDOW.min(d2 - k)];
@@ -335,6 +341,7 @@ impl FieldScan {
             slope: f64::NAN,
             time: Default::default(),
             cells,
+            clamped: (None, None),
             notes,
         };
         match self.opts.field {
@@ -392,6 +399,11 @@ pub fn classify(c: &mut Conditioning, windows: &[Window], range: &ValueRange) {
         (range.n_max > many).then_some(range.max as f32),
     );
     let clamped = |v: f32| Some(v) == lo_clamp || Some(v) == hi_clamp;
+    // Clamped values are far: read as such whatever the map says of them.
+    c.clamped = (
+        (range.n_min > many).then_some(range.min),
+        (range.n_max > many).then_some(range.max),
+    );
     let analyse = |map: &(dyn Fn(f64) -> f64 + Sync), tried: usize| -> Vec<(f64, f64)> {
         let per_window = tried.div_ceil(windows.len().max(1));
         windows
@@ -686,17 +698,16 @@ fn check_distance_like(
         1.0
     };
     let near_one = rates.iter().filter(|r| (**r - 1.0).abs() <= 0.25).count();
+    // Too few nodes between one and three cells (a binary occupancy, a field clamped within a
+    // cell or two) tell nothing: no pass.
     let m = if rates.len() >= 20 {
         median(&mut rates)
     } else {
-        1.0
+        f64::NAN
     };
     // Loose enough for a learned field (slopes of 0.8 to 1.2 are common), tight enough to
     // catch a reading that squeezes or stretches the distances near the surface by a quarter.
-    if (m - 1.0).abs() <= 0.25
-        && (rates.len() < 20 || near_one * 5 >= rates.len() * 2)
-        && (span - 1.0).abs() <= 0.2
-    {
+    if (m - 1.0).abs() <= 0.25 && near_one * 5 >= rates.len() * 2 && (span - 1.0).abs() <= 0.2 {
         return;
     }
     let factor = match &c.kind {

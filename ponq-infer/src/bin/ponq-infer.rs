@@ -326,7 +326,13 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
         },
         condition: ponq_data::condition::ConditionOptions {
             level: args.level,
-            inside: args.inside,
+            // An open surface's boundary lies on both sides: signed distances, unless told.
+            inside: match (args.inside, args.open) {
+                (ponq_data::condition::Inside::Auto, Some(_)) => {
+                    ponq_data::condition::Inside::Negative
+                }
+                (i, _) => i,
+            },
             field: args.field,
         },
         ..Default::default()
@@ -447,19 +453,25 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
         let mut o2 = opts.clone();
         o2.condition.field = ponq_data::condition::FieldKind::Redistance;
         let sp = spinner(args.quiet, "re-distancing and meshing again");
-        let g2 = ponq_infer::grid_input::read_grid(
+        let second = ponq_infer::grid_input::read_grid(
             &args.input,
             net_cfg.encoder_layers,
             &o2,
             |_, _, _| {},
-        )?;
-        if g2.conditioning.needs_whole_grid() {
+        )
+        .and_then(|g2| {
             let mut p2 = predict_band(&net, net_cfg.encoder_layers, g2.band, &o2, &dev, |_, _| {})?;
             p2.conditioning = Some(g2.conditioning);
-            let r2 = finish(&p2, &o2)?;
-            res = ponq_infer::keep_closer(res, r2);
-            conditioning = res.conditioning.clone();
-        }
+            finish(&p2, &o2)
+        });
+        res = match second {
+            Ok(r2) => ponq_infer::keep_closer(res, r2),
+            // A failed second reading leaves the first mesh, with a note.
+            Err(e) => {
+                ponq_infer::with_note(res, format!("reading it again re-distanced failed: {e:#}"))
+            }
+        };
+        conditioning = res.conditioning.clone();
         sp.finish_and_clear();
     }
     if res.mesh.faces.is_empty() {

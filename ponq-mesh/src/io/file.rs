@@ -37,6 +37,19 @@ pub(crate) fn write_mesh_file(
     write_file(path, |w| to(w, mesh))
 }
 
+/// Creates `path` and lets `f` write into it ([`write_file`] for writers that check their
+/// input first).
+pub(crate) fn write_with(
+    path: &Path,
+    f: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<()> {
+    let r = write_file(path, f);
+    if r.is_err() {
+        let _ = std::fs::remove_file(path);
+    }
+    r
+}
+
 /// Writes one text line per item of `items` to `w`, in order: the lines are formatted by
 /// `line` in parallel, a block of items per task, a few blocks at a time (the formatting of
 /// floats is most of the time of writing a mesh as text; the memory held is a few blocks').

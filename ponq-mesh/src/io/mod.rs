@@ -17,6 +17,7 @@
 //! `write_to(impl Write, &TriMesh)` function.
 
 mod builder;
+mod coloured;
 mod file;
 pub mod npy;
 pub mod npz;
@@ -26,6 +27,8 @@ pub mod ply;
 pub mod stl;
 
 use std::path::Path;
+
+pub use coloured::{read_mesh_coloured, write_mesh_coloured};
 
 use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;

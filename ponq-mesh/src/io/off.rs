@@ -168,6 +168,47 @@ pub fn write_to<W: Write>(mut w: W, mesh: &TriMesh) -> std::io::Result<()> {
     })
 }
 
+/// Writes `mesh` as `COFF` text to `w`, a colour per vertex (`x y z r g b a`, bytes 0 to 255).
+///
+/// # Errors
+/// As [`write_to`]; colours of another count than the vertices.
+pub fn write_coloured_to<W: Write>(
+    mut w: W,
+    mesh: &TriMesh,
+    colours: &[[f32; 3]],
+) -> std::io::Result<()> {
+    check_writable(mesh)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
+    if colours.len() != mesh.vertices.len() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "{} colours for {} vertices",
+                colours.len(),
+                mesh.vertices.len()
+            ),
+        ));
+    }
+    writeln!(w, "COFF")?;
+    writeln!(w, "{} {} 0", mesh.vertices.len(), mesh.faces.len())?;
+    let rows: Vec<([f64; 3], [u8; 3])> = mesh
+        .vertices
+        .iter()
+        .zip(colours)
+        .map(|(v, c)| (*v, crate::colour::to_bytes(*c)))
+        .collect();
+    write_lines_par(&mut w, &rows, |o, (v, c)| {
+        writeln!(
+            o,
+            "{:?} {:?} {:?} {} {} {} 255",
+            v[0], v[1], v[2], c[0], c[1], c[2]
+        )
+    })?;
+    write_lines_par(&mut w, &mesh.faces, |o, f| {
+        writeln!(o, "3 {} {} {}", f[0], f[1], f[2])
+    })
+}
+
 /// Writes `mesh` to the OFF file `path`; errors name the file. A mesh with a face index out
 /// of range or a non-finite coordinate gives [`Error::InvalidInput`] and no file.
 pub fn write(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {

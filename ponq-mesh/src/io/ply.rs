@@ -379,8 +379,43 @@ fn scalar_prop(el: &Element, name: &str) -> std::result::Result<(usize, Scalar),
     }
 }
 
+/// The colour properties of an element: `red green blue` (or `r g b`, `diffuse_red ..`),
+/// their places and types, and the scale to `[0, 1]` (1/255 for integer types).
+fn colour_props(el: &Element) -> Option<[(usize, Scalar); 3]> {
+    let find = |names: &[&str]| {
+        el.props.iter().enumerate().find_map(|(i, p)| match p.kind {
+            PropKind::Scalar(t) if names.contains(&p.name.as_str()) => Some((i, t)),
+            _ => None,
+        })
+    };
+    Some([
+        find(&["red", "r", "diffuse_red"])?,
+        find(&["green", "g", "diffuse_green"])?,
+        find(&["blue", "b", "diffuse_blue"])?,
+    ])
+}
+
+/// A colour value of type `t` in `[0, 1]`.
+fn colour_value(v: f64, t: Scalar) -> f32 {
+    let scaled = if t.is_int() {
+        v / t.int_range().1 as f64
+    } else {
+        v
+    };
+    scaled.clamp(0.0, 1.0) as f32
+}
+
 /// Parses the content of a PLY file; errors are plain messages.
 pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
+    parse_with_colours(bytes).map(|(m, _)| m)
+}
+
+/// [`parse`], and the colours the file gives: per vertex (`red green blue` of the vertex
+/// element), else per face (those of the face element; each triangle of a polygon takes its
+/// colour).
+pub fn parse_with_colours(
+    bytes: &[u8],
+) -> std::result::Result<(TriMesh, Option<crate::colour::Colours>), String> {
     let header = parse_header(bytes)?;
     let body = &bytes[header.data_start..];
     let mut data = match header.format {
@@ -419,6 +454,8 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
     let mut builder = MeshBuilder::default();
     let mut vertices_read = false;
     let mut poly: Vec<u64> = Vec::new();
+    let mut vertex_colours: Vec<[f32; 3]> = Vec::new();
+    let mut face_colours: Vec<[f32; 3]> = Vec::new();
     for (ei, el) in header.elements.iter().enumerate() {
         let ctx = |r: u64, m: String| format!("element '{}' record {r}: {m}", el.name);
         let cap = capped_capacity(
@@ -430,9 +467,11 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
             let (ix, tx) = scalar_prop(el, "x")?;
             let (iy, ty) = scalar_prop(el, "y")?;
             let (iz, tz) = scalar_prop(el, "z")?;
+            let rgb = colour_props(el);
             builder = MeshBuilder::with_capacity(cap, 0);
             for r in 0..el.count {
                 let mut v = [0.0; 3];
+                let mut c = [0.0f32; 3];
                 for (pi, p) in el.props.iter().enumerate() {
                     let slot = if pi == ix {
                         Some((0, tx))
@@ -443,12 +482,20 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
                     } else {
                         None
                     };
-                    match slot {
-                        Some((k, t)) => v[k] = data.read(t).map_err(|m| ctx(r, m))?,
-                        None => data.skip_prop(p.kind).map_err(|m| ctx(r, m))?,
+                    let channel = rgb.and_then(|cs| cs.iter().position(|&(i, _)| i == pi));
+                    match (slot, channel) {
+                        (Some((k, t)), _) => v[k] = data.read(t).map_err(|m| ctx(r, m))?,
+                        (None, Some(k)) => {
+                            let t = rgb.map_or(Scalar::F32, |cs| cs[k].1);
+                            c[k] = colour_value(data.read(t).map_err(|m| ctx(r, m))?, t);
+                        }
+                        (None, None) => data.skip_prop(p.kind).map_err(|m| ctx(r, m))?,
                     }
                 }
                 builder.push_vertex(v).map_err(|m| ctx(r, m))?;
+                if rgb.is_some() {
+                    vertex_colours.push(c);
+                }
             }
             vertices_read = true;
         } else if Some(ei) == face_el {
@@ -479,9 +526,12 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
                 ));
             }
             let limit = vertices_read.then(|| builder.vertex_count());
+            let rgb = colour_props(el);
             for r in 0..el.count {
                 poly.clear();
+                let mut c = [0.0f32; 3];
                 for (pi, p) in el.props.iter().enumerate() {
+                    let channel = rgb.and_then(|cs| cs.iter().position(|&(i, _)| i == pi));
                     if pi == li {
                         let n = data.read_count(ct).map_err(|m| ctx(r, m))?;
                         for _ in 0..n {
@@ -491,11 +541,17 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
                             }
                             poly.push(idx as u64);
                         }
+                    } else if let (Some(k), Some(cs)) = (channel, rgb) {
+                        c[k] = colour_value(data.read(cs[k].1).map_err(|m| ctx(r, m))?, cs[k].1);
                     } else {
                         data.skip_prop(p.kind).map_err(|m| ctx(r, m))?;
                     }
                 }
                 builder.push_polygon(&poly, limit).map_err(|m| ctx(r, m))?;
+                if rgb.is_some() {
+                    // One colour for each triangle of the polygon's fan.
+                    face_colours.extend(std::iter::repeat_n(c, poly.len().saturating_sub(2)));
+                }
             }
         } else if el.props.is_empty() {
             // Records without properties take no room.
@@ -519,7 +575,69 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
             }
         }
     }
-    builder.finish()
+    let mesh = builder.finish()?;
+    let colours = if !vertex_colours.is_empty() && vertex_colours.len() == mesh.vertices.len() {
+        Some(crate::colour::Colours::Vertex(vertex_colours))
+    } else if !face_colours.is_empty() && face_colours.len() == mesh.faces.len() {
+        Some(crate::colour::Colours::Face(face_colours))
+    } else {
+        None
+    };
+    Ok((mesh, colours))
+}
+
+/// Writes `mesh` as a binary little-endian PLY with a colour per vertex (`uchar red green
+/// blue`).
+///
+/// # Errors
+/// As [`write_to`]; colours of another count than the vertices.
+pub fn write_coloured_to<W: Write>(
+    mut w: W,
+    mesh: &TriMesh,
+    colours: &[[f32; 3]],
+) -> std::io::Result<()> {
+    check_writable(mesh)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
+    if colours.len() != mesh.vertices.len() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "{} colours for {} vertices",
+                colours.len(),
+                mesh.vertices.len()
+            ),
+        ));
+    }
+    let index_type = if mesh.vertices.len() > i32::MAX as usize + 1 {
+        "uint"
+    } else {
+        "int"
+    };
+    write!(
+        w,
+        "ply\nformat binary_little_endian 1.0\ncomment written by ponq-mesh\n\
+         element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element face {}\nproperty list uchar {index_type} vertex_indices\nend_header\n",
+        mesh.vertices.len(),
+        mesh.faces.len()
+    )?;
+    let mut buf = Vec::with_capacity(mesh.vertices.len() * 27);
+    for (v, c) in mesh.vertices.iter().zip(colours) {
+        for x in v {
+            buf.extend_from_slice(&x.to_le_bytes());
+        }
+        buf.extend_from_slice(&crate::colour::to_bytes(*c));
+    }
+    w.write_all(&buf)?;
+    buf.clear();
+    for f in &mesh.faces {
+        buf.push(3);
+        for &i in f {
+            buf.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    w.write_all(&buf)
 }
 
 fn write_header<W: Write>(w: &mut W, mesh: &TriMesh, format: &str) -> std::io::Result<()> {

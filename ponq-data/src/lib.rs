@@ -20,6 +20,7 @@
 //! ```
 
 pub mod broken;
+pub mod colour_transfer;
 pub mod condition;
 pub mod conventions;
 pub mod dataset;

@@ -381,6 +381,22 @@ pub fn predict(
     device: &Device,
     progress: impl FnMut(usize, usize),
 ) -> Result<Predicted> {
+    let (band, conditioning) = conditioned_band(grid, encoder_layers, opts)?;
+    let mut out = predict_band(net, encoder_layers, band, opts, device, progress)?;
+    out.conditioning = Some(conditioning);
+    Ok(out)
+}
+
+/// A grid in memory read as [`predict`] reads it: its values conditioned (`opts.condition`)
+/// and stored near the surface, for a network of `encoder_layers`.
+///
+/// # Errors
+/// As [`predict`], but the network's.
+pub fn conditioned_band(
+    grid: &Grid3,
+    encoder_layers: usize,
+    opts: &InferOptions,
+) -> Result<(BandGrid, Conditioning)> {
     let frame = Frame::of(grid, opts.bounds)?;
     let plane = grid.dims[1] * grid.dims[2];
     if grid.data.len() != grid.dims.iter().product::<usize>() {
@@ -430,10 +446,7 @@ pub fn predict(
             }
         }
     }
-    let band = b.finish()?;
-    let mut out = predict_band(net, encoder_layers, band, opts, device, progress)?;
-    out.conditioning = Some(conditioning);
-    Ok(out)
+    Ok((b.finish()?, conditioning))
 }
 
 /// [`predict`] on a grid already stored near its surface, in the normalised frame (read with

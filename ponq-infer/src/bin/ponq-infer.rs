@@ -86,6 +86,14 @@ struct Args {
     /// mesh strays from the field's zero set.
     #[arg(long, value_name = "KIND", default_value = "auto")]
     field: ponq_data::condition::FieldKind,
+    /// Do not carry colours. By default a coloured input gives each output vertex its colour:
+    /// a mesh's (PLY vertex or face `red green blue`, OBJ `v x y z r g b`, OBJ materials and
+    /// `map_Kd` textures) at the vertex's closest point on it, a grid's (`.npz` with `sdf`
+    /// and `rgb` of shape (nx, ny, nz, 3)) trilinearly; PLY outputs get `uchar red green
+    /// blue`, OBJ `v x y z r g b`, OFF `COFF`. An uncoloured input gives the same file as
+    /// before colours existed.
+    #[arg(long)]
+    no_colours: bool,
     /// Mesh input only: cells per side of the SDF grid (RES+1 nodes per side): 32 is coarse
     /// (the network's training resolution), 128 fine [default: 64].
     #[arg(long, value_name = "RES")]
@@ -201,6 +209,52 @@ fn bar(quiet: bool, template: &str) -> ProgressBar {
         ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     pb
+}
+
+/// Where the output's colours come from.
+enum ColourFrom {
+    None,
+    /// The input mesh (in its coordinates) and its colours.
+    Mesh(ponq_mesh::TriMesh, ponq_mesh::colour::Colours),
+    /// A colour per node of the grid of these dims.
+    Grid(Vec<ponq_mesh::colour::Rgb>, [usize; 3]),
+}
+
+/// The colour of each vertex of `mesh` (the output, in the input's coordinates, or the grid's
+/// normalised frame with --normalized).
+fn vertex_colours(
+    source: &ColourFrom,
+    mesh: &ponq_mesh::TriMesh,
+    normalization: Option<&ponq_data::normalize::Normalization>,
+    normalized: bool,
+    opts: &InferOptions,
+) -> Result<Option<Vec<ponq_mesh::colour::Rgb>>> {
+    Ok(match source {
+        ColourFrom::None => None,
+        ColourFrom::Mesh(input, c) => {
+            let points: Vec<[f64; 3]> = match (normalization, normalized) {
+                (Some(n), true) => n.invert_mesh(mesh).vertices,
+                _ => mesh.vertices.clone(),
+            };
+            let src = ponq_data::colour_transfer::ColourSource::new(input, c)
+                .context("the input mesh's colours")?;
+            Some(src.colours(&points))
+        }
+        ColourFrom::Grid(rgb, dims) => {
+            let frame = ponq_infer::Frame::of_dims(*dims, opts.bounds)?;
+            Some(ponq_data::colour_transfer::grid_colours(
+                rgb,
+                *dims,
+                frame.lo,
+                frame.h,
+                &mesh.vertices,
+            ))
+        }
+    })
+}
+
+fn is_npz(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("npz"))
 }
 
 fn is_mesh_path(p: &Path) -> bool {
@@ -339,9 +393,18 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     };
     let t = Instant::now();
     let mut conditioning = None;
+    let mut source = ColourFrom::None;
     let (grid, normalization) = if mesh_input {
-        let mesh = io::read_mesh(&args.input)
-            .with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
+        let (mesh, colours) = if args.no_colours {
+            (io::read_mesh(&args.input), None)
+        } else {
+            match io::read_mesh_coloured(&args.input) {
+                Ok((m, c)) => (Ok(m), c),
+                Err(e) => (Err(e), None),
+            }
+        };
+        let mesh =
+            mesh.with_context(|| format!("cannot read the mesh {}", args.input.display()))?;
         let res = args.res.unwrap_or(64);
         let pb = bar(
             args.quiet,
@@ -380,22 +443,29 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
                  number (--open culls the triangles away from the surface)"
             );
         }
+        if let Some(c) = colours {
+            source = ColourFrom::Mesh(mesh, c);
+        }
         (g.grid, Some(g.normalization))
     } else {
         let pb = bar(
             args.quiet,
             "{msg} {bar:30} {pos}/{len} planes [{elapsed} < {eta}]",
         );
-        let g = ponq_infer::grid_input::read_grid(
-            &args.input,
-            net_cfg.encoder_layers,
-            &opts,
-            |stage, done, total| {
-                pb.set_message(stage.to_string());
-                pb.set_length(total as u64);
-                pb.set_position(done as u64);
-            },
-        );
+        let g = if is_npz(&args.input) {
+            ponq_infer::grid_input::read_grid_npz(&args.input, net_cfg.encoder_layers, &opts)
+        } else {
+            ponq_infer::grid_input::read_grid(
+                &args.input,
+                net_cfg.encoder_layers,
+                &opts,
+                |stage, done, total| {
+                    pb.set_message(stage.to_string());
+                    pb.set_length(total as u64);
+                    pb.set_position(done as u64);
+                },
+            )
+        };
         pb.finish_and_clear();
         let g = match g {
             Err(e) if format!("{e:#}").contains("no sign change") => {
@@ -405,6 +475,9 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             g => g?,
         };
         conditioning = Some(g.conditioning);
+        if let (Some(c), false) = (g.colours, args.no_colours) {
+            source = ColourFrom::Grid(c, g.band.dims());
+        }
         (g.band, None)
     };
     let read_time = t.elapsed();
@@ -494,8 +567,18 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
     {
         res.mesh = norm.invert_mesh(&res.mesh);
     }
+    let t_colours = Instant::now();
+    let colours = vertex_colours(
+        &source,
+        &res.mesh,
+        normalization.as_ref(),
+        args.normalized,
+        &opts,
+    )?;
+    let colour_time = t_colours.elapsed();
     let t = Instant::now();
-    io::write_mesh(&args.output, &res.mesh).context("writing the mesh")?;
+    io::write_mesh_coloured(&args.output, &res.mesh, colours.as_deref())
+        .context("writing the mesh")?;
     if let Some(p) = &args.save_ponq {
         io::npz::write_ponq(p, &res.ponq).context("writing the PoNQ")?;
     }
@@ -546,6 +629,27 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             res.mesh.vertices.len(),
             res.mesh.faces.len()
         );
+        if colours.is_some() {
+            println!(
+                "colours: {} of the output's {} vertices, {} ({:.1} ms)",
+                match &source {
+                    ColourFrom::Mesh(..) => "at the closest points of the input mesh",
+                    ColourFrom::Grid(..) => "trilinear in the grid's 'rgb'",
+                    ColourFrom::None => "",
+                },
+                res.mesh.vertices.len(),
+                if args
+                    .output
+                    .extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+                {
+                    "uchar red green blue"
+                } else {
+                    "written per vertex"
+                },
+                colour_time.as_secs_f64() * 1e3
+            );
+        }
         if let Some(c) = &conditioning {
             match res.surface_agreement {
                 Some(a) => println!(

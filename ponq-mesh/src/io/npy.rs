@@ -501,14 +501,17 @@ fn parse_header_text(text: &[u8]) -> std::result::Result<HeaderInfo, String> {
     })
 }
 
-/// Element size (4 or 8) of an accepted dtype description.
+/// Element size (1, 4 or 8) of an accepted dtype description.
 fn float_size(descr: &str) -> std::result::Result<usize, String> {
     let body = descr.strip_prefix(['<', '>', '=', '|']).unwrap_or(descr);
     match body {
         "f4" => Ok(4),
         "f8" => Ok(8),
+        // Bytes (uint8, bool): colours, voxel occupancies.
+        "u1" | "b1" => Ok(1),
         _ => Err(format!(
-            "unsupported dtype '{}': expected float32 ('<f4', '>f4') or float64 ('<f8', '>f8')",
+            "unsupported dtype '{}': expected float32 ('<f4', '>f4'), float64 ('<f8', '>f8') \
+             or bytes ('|u1', '|b1')",
             descr.chars().take(32).collect::<String>()
         )),
     }
@@ -660,6 +663,7 @@ fn read_values_into<R: Read>(
         }
         let bytes = &buf[..want];
         match (size, big) {
+            (1, _) => data.extend(bytes.iter().map(|&b| f64::from(b))),
             (4, false) => data.extend(
                 bytes
                     .chunks_exact(4)

@@ -212,6 +212,62 @@ fn faces_out<'py>(py: Python<'py>, f: &[[u32; 3]]) -> PyResult<Bound<'py, PyAny>
         .into_any())
 }
 
+/// A colour per grid node from an `(nx, ny, nz, 3)` array of floats in `[0, 1]` or of bytes
+/// (any integer dtype, 0 to 255), matching the grid's `dims`.
+pub(crate) fn grid_colours(
+    obj: &Bound<'_, PyAny>,
+    dims: [usize; 3],
+) -> PyResult<Vec<ponq_mesh::colour::Rgb>> {
+    let bytes = obj
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract::<String>())
+        .is_ok_and(|k| k == "u" || k == "i");
+    let (shape, data) = floats(obj, "colours")?;
+    if shape != [dims[0], dims[1], dims[2], 3] {
+        return Err(value_err(format!(
+            "colours: expected the grid's shape with 3 channels, ({}, {}, {}, 3), found {}",
+            dims[0],
+            dims[1],
+            dims[2],
+            shape_str(&shape)
+        )));
+    }
+    let (scale, top) = if bytes {
+        (1.0 / 255.0, 255.0)
+    } else {
+        (1.0, 1.0)
+    };
+    if let Some(v) = data
+        .iter()
+        .find(|v| !(v.is_finite() && **v >= 0.0 && **v <= top))
+    {
+        return Err(value_err(format!(
+            "colours: {v} is outside [0, {top}] ({})",
+            if bytes {
+                "bytes"
+            } else {
+                "floats are in [0, 1]"
+            }
+        )));
+    }
+    Ok(data
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]].map(|x| (x * scale) as f32))
+        .collect())
+}
+
+/// Colours as a float64 `(V, 3)` array in `[0, 1]`.
+pub(crate) fn colours_out<'py>(
+    py: Python<'py>,
+    c: &[ponq_mesh::colour::Rgb],
+) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f64> = c.iter().flatten().map(|&x| f64::from(x)).collect();
+    Ok(PyArray1::from_vec(py, flat)
+        .reshape([c.len(), 3])?
+        .into_any())
+}
+
 pub(crate) fn mesh_out<'py>(py: Python<'py>, m: &TriMesh) -> PyResult<Vec<Bound<'py, PyAny>>> {
     Ok(vec![vec3_out(py, &m.vertices)?, faces_out(py, &m.faces)?])
 }

@@ -39,6 +39,9 @@ use crate::options::{condition_options, infer_options, warn_invalid};
 ///     bounds: the box of the grid, 6 floats ``(xmin, ymin, zmin, xmax, ymax, zmax)``; a cube
 ///         (the cells must be cubes); default ``[-1, 1]^3``.
 ///     level, inside, field: how the values are read, as in ``ponq.infer``.
+///     colour: a callable taking the output's vertices, a float64 array (N, 3), and returning
+///         their colours (N, 3) in [0, 1] (a colour field); called once, in batches of
+///         ``batch`` points. The colours are returned after the faces.
 ///     lipschitz: how fast the conditioned field may change (distance per unit length); raise
 ///         it for a neural field that is not quite a distance (more points are evaluated); it
 ///         is widened where the evaluated bricks show faster slopes.
@@ -46,7 +49,8 @@ use crate::options::{condition_options, infer_options, warn_invalid};
 ///     model, lite, coarsen, merge_smooth, refine, threads, check: as in ``ponq.infer``.
 ///
 /// Returns:
-///     ``(vertices, faces, stats)``: the mesh as ``ponq.infer`` returns it, and a dict with
+///     ``(vertices, faces, stats)``, or ``(vertices, faces, colours, stats)`` with ``colour``:
+///     the mesh as ``ponq.infer`` returns it, and a dict with
 ///     ``calls`` (calls of ``f``), ``points`` (points evaluated), ``dense_points`` (the
 ///     grid's nodes), ``stored_bricks``, ``lipschitz`` (the bound the last pass used) and
 ///     ``field`` (how the values were read, a line).
@@ -57,8 +61,8 @@ use crate::options::{condition_options, infer_options, warn_invalid};
 ///     Any exception ``f`` raises.
 #[pyfunction]
 #[pyo3(
-    signature = (f, res, *, bounds=None, level=None, inside="auto", field="auto", lipschitz=1.0, batch=65536, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), refine="auto", threads=None, check=true),
-    text_signature = "(f, res, *, bounds=None, level=None, inside='auto', field='auto', lipschitz=1.0, batch=65536, model=None, lite=False, coarsen=0, merge_smooth=15.0, refine='auto', threads=None, check=True)"
+    signature = (f, res, *, bounds=None, level=None, inside="auto", field="auto", colour=None, lipschitz=1.0, batch=65536, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), refine="auto", threads=None, check=true),
+    text_signature = "(f, res, *, bounds=None, level=None, inside='auto', field='auto', colour=None, lipschitz=1.0, batch=65536, model=None, lite=False, coarsen=0, merge_smooth=15.0, refine='auto', threads=None, check=True)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn infer_field<'py>(
@@ -69,6 +73,7 @@ pub(crate) fn infer_field<'py>(
     level: Option<f64>,
     inside: &str,
     field: &str,
+    colour: Option<Bound<'py, PyAny>>,
     lipschitz: f64,
     batch: usize,
     model: Option<PathBuf>,
@@ -88,6 +93,12 @@ pub(crate) fn infer_field<'py>(
     if !f.is_callable() {
         return Err(value_err(
             "f must be a callable: points (N, 3) -> distances (N,)",
+        ));
+    }
+    let colour = colour.filter(|c| !c.is_none());
+    if colour.as_ref().is_some_and(|c| !c.is_callable()) {
+        return Err(value_err(
+            "colour must be a callable: points (N, 3) -> colours (N, 3) in [0, 1]",
         ));
     }
     let condition = condition_options(level, inside, field)?;
@@ -155,6 +166,9 @@ pub(crate) fn infer_field<'py>(
     }
     warn_invalid(py, report.as_ref(), false)?;
     let mut out = mesh_out(py, &res_.mesh)?;
+    if let Some(g) = &colour {
+        out.push(call_colours(py, g, &res_.mesh.vertices, batch)?);
+    }
     let d = PyDict::new(py);
     d.set_item("calls", stats.calls)?;
     d.set_item("points", stats.points)?;
@@ -164,4 +178,40 @@ pub(crate) fn infer_field<'py>(
     d.set_item("field", summary)?;
     out.push(d.into_any());
     tuple(py, out)
+}
+
+/// The colour field `g` at `points`, called in batches of `batch`: a float64 `(N, 3)` array.
+fn call_colours<'py>(
+    py: Python<'py>,
+    g: &Bound<'py, PyAny>,
+    points: &[[f64; 3]],
+    batch: usize,
+) -> PyResult<Bound<'py, PyAny>> {
+    let mut all: Vec<[f32; 3]> = Vec::with_capacity(points.len());
+    for chunk in points.chunks(batch.max(1)) {
+        let flat: Vec<f64> = chunk.iter().flatten().copied().collect();
+        let arr = numpy::PyArray1::from_vec(py, flat).reshape([chunk.len(), 3])?;
+        let got = g.call1((arr,))?;
+        let (shape, data) = crate::arrays::floats(&got, "colour")?;
+        if shape != [chunk.len(), 3] {
+            return Err(value_err(format!(
+                "colour returned an array of shape {shape:?} for {} points; expected ({}, 3)",
+                chunk.len(),
+                chunk.len()
+            )));
+        }
+        if let Some(v) = data
+            .iter()
+            .find(|v| !(v.is_finite() && **v >= 0.0 && **v <= 1.0))
+        {
+            return Err(value_err(format!(
+                "colour returned {v}: colours are in [0, 1]"
+            )));
+        }
+        all.extend(
+            data.chunks_exact(3)
+                .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32]),
+        );
+    }
+    crate::arrays::colours_out(py, &all)
 }

@@ -11,7 +11,7 @@ use ponq_model::{PonqNet, PonqNetConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
-use crate::arrays::{grid3, mesh_out, ponq_out, tuple};
+use crate::arrays::{colours_out, grid_colours, grid3, mesh_out, ponq_out, tuple};
 use crate::errors::{Failure, run, value_err, warn};
 use crate::options::{check_open, condition_options, infer_options, open_arg, warn_invalid};
 
@@ -82,14 +82,16 @@ pub(crate) fn network(
 ///         passes a check of a true signed distance), ``"on"`` or ``"off"``. Not with
 ///         ``open``; ``"on"`` not with ``lite`` / ``coarsen``.
 ///     threads: worker threads (a pool of that size for this call); default all cores.
+///     colours: a colour per grid node, ``(nx, ny, nz, 3)``: floats in [0, 1] or bytes; each
+///         output vertex gets the trilinear colour at its place, returned after the faces.
 ///     return_ponq: also return the PoNQ that was meshed (in the grid's coordinates).
 ///     check: check the output's validity (closed, oriented, manifold, no
 ///         self-intersection) as the program does; a failure gives a ``RuntimeWarning``.
 ///
 /// Returns:
 ///     ``(vertices, faces)``: float64 (V, 3) in the coordinates of ``bounds``, int64 (F, 3)
-///     (0-based, counter-clockwise seen from outside). With ``return_ponq=True`` a third
-///     element: a dict of float64 arrays ``points`` (M, 3), ``normals`` (M, 3),
+///     (0-based, counter-clockwise seen from outside); with ``colours``, then float64 (V, 3)
+///     colours in [0, 1]. With ``return_ponq=True`` a last element: a dict of float64 arrays ``points`` (M, 3), ``normals`` (M, 3),
 ///     ``quadrics`` (M, 4, 4) (``[[A, -b], [-b^T, c]]``) and ``vstars`` (M, 3).
 ///     When the network keeps no cell the mesh is empty and a ``UserWarning`` says so.
 ///
@@ -99,8 +101,8 @@ pub(crate) fn network(
 ///     RuntimeError: a failure of the computation.
 #[pyfunction]
 #[pyo3(
-    signature = (sdf, *, bounds=None, level=None, inside="auto", field="auto", model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), open=None, refine="auto", threads=None, return_ponq=false, check=true),
-    text_signature = "(sdf, *, bounds=None, level=None, inside='auto', field='auto', model=None, lite=False, coarsen=0, merge_smooth=15.0, open=None, refine='auto', threads=None, return_ponq=False, check=True)"
+    signature = (sdf, *, bounds=None, level=None, inside="auto", field="auto", colours=None, model=None, lite=false, coarsen=0, merge_smooth=Some(ponq_infer::reconstruct::DEFAULT_MERGE_SMOOTH_DEG), open=None, refine="auto", threads=None, return_ponq=false, check=true),
+    text_signature = "(sdf, *, bounds=None, level=None, inside='auto', field='auto', colours=None, model=None, lite=False, coarsen=0, merge_smooth=15.0, open=None, refine='auto', threads=None, return_ponq=False, check=True)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn infer<'py>(
@@ -110,6 +112,7 @@ pub(crate) fn infer<'py>(
     level: Option<f64>,
     inside: &str,
     field: &str,
+    colours: Option<Bound<'py, PyAny>>,
     model: Option<PathBuf>,
     lite: bool,
     coarsen: u32,
@@ -128,6 +131,12 @@ pub(crate) fn infer<'py>(
     let condition = condition_options(level, inside, field)?;
     let opts = infer_options(bounds, lite, coarsen, merge_smooth, open, refine, condition)?;
     let grid = grid3(sdf)?;
+    let rgb = match colours.as_ref().filter(|c| !c.is_none()) {
+        Some(c) => Some(grid_colours(c, grid.dims)?),
+        None => None,
+    };
+    let dims = grid.dims;
+    let bounds = opts.bounds;
     let (res, report) = run(py, threads, move || {
         // The checks of `predict`, first, so that their errors are input errors.
         Frame::of(&grid, opts.bounds).map_err(|e| Failure::Value(format!("{e:#}")))?;
@@ -143,6 +152,17 @@ pub(crate) fn infer<'py>(
     }
     warn_invalid(py, report.as_ref(), open.is_some())?;
     let mut out = mesh_out(py, &res.mesh)?;
+    if let Some(rgb) = &rgb {
+        let frame = Frame::of_dims(dims, bounds).map_err(|e| value_err(format!("{e:#}")))?;
+        let c = ponq_data::colour_transfer::grid_colours(
+            rgb,
+            dims,
+            frame.lo,
+            frame.h,
+            &res.mesh.vertices,
+        );
+        out.push(colours_out(py, &c)?);
+    }
     if return_ponq {
         out.push(ponq_out(py, &res.ponq)?);
     }

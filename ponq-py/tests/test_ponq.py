@@ -585,6 +585,31 @@ def test_infer_field_of_an_mlp_in_voxel_units():
     assert stats["points"] < stats["dense_points"]
 
 
+def test_colours_from_a_grid_and_from_a_field():
+    """A colour field (linear in the position) through infer_field equals the same colours as
+    a grid through infer: the same mesh, the same colour at every vertex."""
+    res = 40
+    g = lambda p: np.clip((np.asarray(p) + 1.0) / 2.0, 0.0, 1.0)
+    v, f, c, stats = ponq.infer_field(_box_sphere, res, colour=g)
+    assert c.shape == v.shape and c.dtype == np.float64
+    lo, h = -1.0, 2.0 / res
+    ax = lo + np.arange(res + 1) * h
+    nodes = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+    vg, fg, cg = ponq.infer(_grid_of(_box_sphere, res), colours=g(nodes.reshape(-1, 3)).reshape(nodes.shape))
+    assert np.array_equal(v, vg) and np.array_equal(f, fg)
+    assert np.abs(c - cg).max() < 1e-5
+    assert np.abs(c - g(v)).max() < 1e-5
+    # Bytes work too; colours of another shape or out of range are errors.
+    vb, fb, cb = ponq.infer(_grid_of(_box_sphere, res), colours=(255 * g(nodes.reshape(-1, 3))).astype(np.uint8).reshape(nodes.shape))
+    assert np.abs(cb - cg).max() < 1.0 / 255 + 1e-6
+    with pytest.raises(ValueError, match="grid's shape with 3 channels"):
+        ponq.infer(_grid_of(_box_sphere, res), colours=np.zeros((3, 3, 3, 3)))
+    with pytest.raises(ValueError, match=r"outside \[0, 1\]"):
+        ponq.infer(_grid_of(_box_sphere, res), colours=2.0 * np.ones(nodes.shape))
+    with pytest.raises(ValueError, match="colours are in"):
+        ponq.infer_field(_box_sphere, 24, colour=lambda p: 2.0 * np.ones((len(p), 3)))
+
+
 def _dataset(tmp_path, count=20):
     """`count` meshes (the shared evaluation meshes where they are, else copies of the
     examples) and one broken file, in a folder."""

@@ -28,6 +28,7 @@ def infer(
     level: Optional[float] = None,
     inside: str = "auto",
     field: str = "auto",
+    colours: None = None,
     model: Union[None, str, os.PathLike[str]] = None,
     lite: bool = False,
     coarsen: int = 0,
@@ -46,6 +47,7 @@ def infer(
     level: Optional[float] = None,
     inside: str = "auto",
     field: str = "auto",
+    colours: None = None,
     model: Union[None, str, os.PathLike[str]] = None,
     lite: bool = False,
     coarsen: int = 0,
@@ -56,6 +58,45 @@ def infer(
     return_ponq: Literal[True],
     check: bool = True,
 ) -> Tuple[Float64Array, Int64Array, PoNQDict]: ...
+@overload
+def infer(
+    sdf: npt.ArrayLike,
+    *,
+    bounds: Bounds = None,
+    level: Optional[float] = None,
+    inside: str = "auto",
+    field: str = "auto",
+    colours: npt.ArrayLike,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    open: OpenArg = None,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    return_ponq: Literal[False] = False,
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, Float64Array]: ...
+@overload
+def infer(
+    sdf: npt.ArrayLike,
+    *,
+    bounds: Bounds = None,
+    level: Optional[float] = None,
+    inside: str = "auto",
+    field: str = "auto",
+    colours: npt.ArrayLike,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    open: OpenArg = None,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    return_ponq: Literal[True],
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, Float64Array, PoNQDict]: ...
+@overload
 def infer_field(
     f: Callable[[Float64Array], npt.ArrayLike],
     res: int,
@@ -64,6 +105,7 @@ def infer_field(
     level: Optional[float] = None,
     inside: str = "auto",
     field: str = "auto",
+    colour: None = None,
     lipschitz: float = 1.0,
     batch: int = 65536,
     model: Union[None, str, os.PathLike[str]] = None,
@@ -73,7 +115,27 @@ def infer_field(
     refine: str = "auto",
     threads: Optional[int] = None,
     check: bool = True,
-) -> Tuple[Float64Array, Int64Array, Dict[str, int]]: ...
+) -> Tuple[Float64Array, Int64Array, Dict[str, Any]]: ...
+@overload
+def infer_field(
+    f: Callable[[Float64Array], npt.ArrayLike],
+    res: int,
+    *,
+    bounds: Bounds = None,
+    level: Optional[float] = None,
+    inside: str = "auto",
+    field: str = "auto",
+    colour: Callable[[Float64Array], npt.ArrayLike],
+    lipschitz: float = 1.0,
+    batch: int = 65536,
+    model: Union[None, str, os.PathLike[str]] = None,
+    lite: bool = False,
+    coarsen: int = 0,
+    merge_smooth: Optional[float] = 15.0,
+    refine: str = "auto",
+    threads: Optional[int] = None,
+    check: bool = True,
+) -> Tuple[Float64Array, Int64Array, Float64Array, Dict[str, Any]]: ...
 def mesh(
     points: npt.ArrayLike,
     normals: npt.ArrayLike,

@@ -573,9 +573,19 @@ def test_infer_field_of_an_mlp_in_voxel_units():
     x = rng.uniform(-1.0, 1.0, (30000, 3))
     feats = lambda p: np.tanh(p @ w + b)
     coef, *_ = np.linalg.lstsq(feats(x), _box_sphere(x), rcond=None)
+    # Evaluated in float32 and in chunks, as a network would be (and fast enough for a test).
+    w32, b32, c32 = (a.astype(np.float32) for a in (w, b, coef))
+
+    def net(p):
+        p = np.asarray(p, dtype=np.float32)
+        out = np.empty(len(p), np.float32)
+        for s in range(0, len(p), 32768):
+            out[s : s + 32768] = np.tanh(p[s : s + 32768] @ w32 + b32) @ c32
+        return out.astype(np.float64)
+
     res = 96
     h = 2.0 / res
-    mlp = lambda p: feats(np.asarray(p)) @ coef / h
+    mlp = lambda p: net(p) / h
     v, f, stats = ponq.infer_field(mlp, res)
     assert "rescaled" in stats["field"], stats["field"]
     vd, fd = ponq.infer(_grid_of(mlp, res))

@@ -29,13 +29,16 @@ trap 'cleanup; rm -f "$before"' EXIT
 n=0
 while IFS= read -r line; do
   n=$((n + 1))
-  echo "[$n] $line"
+  t0=$(date +%s.%N)
   if ! bash -euo pipefail -c "$line" > /tmp/readme_example_$$.log 2>&1; then
+    echo "[$n] $line"
     cat /tmp/readme_example_$$.log
     rm -f /tmp/readme_example_$$.log
     echo "README example failed: $line" >&2
     exit 1
   fi
+  # Each command with its time (seconds), so that a slow example shows in CI's log.
+  echo "[$n] $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f s", b - a }')  $line"
 done <<< "$commands"
 rm -f /tmp/readme_example_$$.log
 echo "all $n README example commands ran"

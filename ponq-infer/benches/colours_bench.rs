@@ -7,8 +7,7 @@
 //! with and without its colours (`--no-colours`, the path before colours existed), in
 //! alternating order. It prints, per mesh and overall: the mean and largest colour error at
 //! the output's vertices against the function there (in % of the range), and the time of both
-//! runs. A mesh written without colours is checked to be the file the same run gives with
-//! `--no-colours`, byte for byte.
+//! runs. The coloured run's mesh is checked to be the `--no-colours` run's, vertex for vertex.
 //!
 //! `cargo bench -p ponq-infer --bench colours_bench -- [--data DIR] [--res 64] [--limit N]`
 

@@ -119,7 +119,8 @@ pub fn read_grid(
 
 /// Reads an `.npz` grid: the array `sdf` (rank 3; the field, read as [`read_grid`] reads a
 /// `.npy`), and the colours of its nodes when there is an array `rgb` of shape
-/// `(nx, ny, nz, 3)` (floats in `[0, 1]`, or bytes). The archive is read whole.
+/// `(nx, ny, nz, 3)` (floats in `[0, 1]`, or bytes) and `with_colours`. The archive is read
+/// whole.
 ///
 /// # Errors
 /// No `sdf` array, arrays of other shapes, colours outside `[0, 1]` (floats) and
@@ -128,6 +129,7 @@ pub fn read_grid_npz(
     path: &std::path::Path,
     encoder_layers: usize,
     opts: &InferOptions,
+    with_colours: bool,
 ) -> Result<GridInput> {
     let context = || format!("cannot read the grid {}", path.display());
     let arrays = ponq_mesh::io::npz::read_arrays(path).with_context(context)?;
@@ -148,7 +150,7 @@ pub fn read_grid_npz(
     }
     let dims = [sdf.shape[0], sdf.shape[1], sdf.shape[2]];
     let grid = ponq_mesh::io::npy::Grid3::new(dims, sdf.data.clone()).with_context(context)?;
-    let colours = match arrays.iter().find(|(n, _)| n == "rgb") {
+    let colours = match arrays.iter().find(|(n, _)| with_colours && n == "rgb") {
         None => None,
         Some((_, rgb)) => {
             if rgb.shape != [dims[0], dims[1], dims[2], 3] {
@@ -159,11 +161,20 @@ pub fn read_grid_npz(
                     rgb.shape
                 );
             }
-            let bytes = rgb.data.iter().any(|&v| v > 1.0);
-            if let Some(v) = rgb.data.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-                anyhow::bail!("{}: 'rgb' holds {v}: colours are in [0, 1]", path.display());
+            // The dtype decides: bytes are 0..=255, floats fractions in [0, 1] (as Python's
+            // `ponq.infer(colours=)` reads them).
+            let top = if rgb.was_bytes { 255.0 } else { 1.0 };
+            if let Some(v) = rgb
+                .data
+                .iter()
+                .find(|v| !(v.is_finite() && **v >= 0.0 && **v <= top))
+            {
+                anyhow::bail!(
+                    "{}: 'rgb' holds {v}: colours are floats in [0, 1] or uint8",
+                    path.display()
+                );
             }
-            let scale = if bytes { 1.0 / 255.0 } else { 1.0 };
+            let scale = 1.0 / top;
             Some(
                 rgb.data
                     .chunks_exact(3)

@@ -260,5 +260,36 @@ fn a_grid_of_colours_is_interpolated() {
     ]);
     assert_eq!(code, Some(0));
     assert_eq!(io::read_mesh(&plain).unwrap(), mesh);
+    // Float colours past 1 are an error (bytes are uint8 arrays); --no-colours reads no rgb.
+    let bad = d.join("bad.npz");
+    io::npz::write_arrays(
+        &bad,
+        &[
+            io::npz::NamedArray {
+                name: "sdf".into(),
+                shape: vec![n, n, n],
+                data: g.data.clone(),
+                f32_storage: true,
+            },
+            io::npz::NamedArray {
+                name: "rgb".into(),
+                shape: vec![n, n, n, 3],
+                data: vec![2.0; g.data.len() * 3],
+                f32_storage: true,
+            },
+        ],
+    )
+    .unwrap();
+    let (code, text) = run(&[os(&bad), "-o".as_ref(), os(&d.join("bad.ply"))]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("'rgb' holds 2"), "{text}");
+    let (code, text) = run(&[
+        os(&bad),
+        "-o".as_ref(),
+        os(&d.join("bad.ply")),
+        "--no-colours".as_ref(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    assert_eq!(io::read_mesh(d.join("bad.ply")).unwrap(), mesh);
     std::fs::remove_dir_all(&d).ok();
 }

@@ -1,8 +1,8 @@
 //! Colours on a triangle mesh, as files carry them: one colour per vertex (PLY `red green blue`,
 //! OBJ `v x y z r g b`), one per face (PLY face `red green blue`, OBJ materials' `Kd`), or a
 //! texture (OBJ `vt` coordinates per face corner and an image per material, `map_Kd` in its
-//! MTL). [`Colours::at`] gives the colour at a point of a face; colours are linear RGB in
-//! `[0, 1]`, `f32`.
+//! MTL). [`Colours::at`] gives the colour at a point of a face; colours are the file's RGB
+//! values (sRGB bytes / 255, interpolated as they are, as viewers do) in `[0, 1]`, `f32`.
 //!
 //! ```
 //! use ponq_mesh::colour::Colours;
@@ -71,8 +71,8 @@ impl Image {
 pub struct Material {
     /// `Kd`.
     pub diffuse: Rgb,
-    /// `map_Kd`, read.
-    pub texture: Option<Image>,
+    /// `map_Kd`, read (shared by the materials that name one file).
+    pub texture: Option<std::sync::Arc<Image>>,
 }
 
 /// A textured mesh's colours: per face, its material and its corners' texture coordinates.
@@ -198,7 +198,7 @@ mod tests {
                 },
                 Material {
                     diffuse: [0.0; 3],
-                    texture: Image::new(1, 1, vec![[0.2, 0.4, 0.6]]),
+                    texture: Image::new(1, 1, vec![[0.2, 0.4, 0.6]]).map(std::sync::Arc::new),
                 },
             ],
         });

@@ -398,8 +398,16 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
         let (mesh, colours) = if args.no_colours {
             (io::read_mesh(&args.input), None)
         } else {
-            match io::read_mesh_coloured(&args.input) {
-                Ok((m, c)) => (Ok(m), c),
+            match io::read_mesh_coloured_noted(&args.input) {
+                Ok((m, c, notes)) => {
+                    // Colours never cost the geometry: what could not be read is said.
+                    if !args.quiet {
+                        for n in notes {
+                            eprintln!("note: colours: {n}");
+                        }
+                    }
+                    (Ok(m), c)
+                }
                 Err(e) => (Err(e), None),
             }
         };
@@ -453,7 +461,12 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
             "{msg} {bar:30} {pos}/{len} planes [{elapsed} < {eta}]",
         );
         let g = if is_npz(&args.input) {
-            ponq_infer::grid_input::read_grid_npz(&args.input, net_cfg.encoder_layers, &opts)
+            ponq_infer::grid_input::read_grid_npz(
+                &args.input,
+                net_cfg.encoder_layers,
+                &opts,
+                !args.no_colours,
+            )
         } else {
             ponq_infer::grid_input::read_grid(
                 &args.input,
@@ -526,13 +539,17 @@ fn run_measured(args: &Args, measured: &mut Measured) -> Result<Outcome> {
         let mut o2 = opts.clone();
         o2.condition.field = ponq_data::condition::FieldKind::Redistance;
         let sp = spinner(args.quiet, "re-distancing and meshing again");
-        let second = ponq_infer::grid_input::read_grid(
-            &args.input,
-            net_cfg.encoder_layers,
-            &o2,
-            |_, _, _| {},
-        )
-        .and_then(|g2| {
+        let again = if is_npz(&args.input) {
+            ponq_infer::grid_input::read_grid_npz(&args.input, net_cfg.encoder_layers, &o2, false)
+        } else {
+            ponq_infer::grid_input::read_grid(
+                &args.input,
+                net_cfg.encoder_layers,
+                &o2,
+                |_, _, _| {},
+            )
+        };
+        let second = again.and_then(|g2| {
             let mut p2 = predict_band(&net, net_cfg.encoder_layers, g2.band, &o2, &dev, |_, _| {})?;
             p2.conditioning = Some(g2.conditioning);
             finish(&p2, &o2)

@@ -15,54 +15,136 @@ use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;
 
 /// Reads a mesh and its colours (`None` when the file carries none; OFF and STL carry none
-/// here). Textures that cannot be read are an error naming them.
+/// here). Colours never cost the geometry: what of them cannot be read (a missing MTL file
+/// or texture, an image format other than PNG or JPEG) is left out; see
+/// [`read_mesh_coloured_noted`] for notes that say what.
 ///
 /// # Errors
-/// As [`read_mesh`]; an MTL file or texture named by the OBJ that cannot be read.
+/// As [`read_mesh`].
 pub fn read_mesh_coloured(path: impl AsRef<Path>) -> Result<(TriMesh, Option<Colours>)> {
+    read_mesh_coloured_noted(path).map(|(m, c, _)| (m, c))
+}
+
+/// [`read_mesh_coloured`], and one note for each colour source left out (a missing or
+/// unreadable MTL file or texture: its material then takes its `Kd`), to tell the user.
+///
+/// # Errors
+/// As [`read_mesh`].
+pub fn read_mesh_coloured_noted(
+    path: impl AsRef<Path>,
+) -> Result<(TriMesh, Option<Colours>, Vec<String>)> {
     let path = path.as_ref();
+    let mut notes = Vec::new();
     match MeshFormat::from_path(path) {
         Some(MeshFormat::Ply) => {
             let bytes = read_file(path)?;
-            ply::parse_with_colours(&bytes).map_err(|m| Error::format(path, m))
+            let (m, c) = ply::parse_with_colours(&bytes).map_err(|m| Error::format(path, m))?;
+            Ok((m, c, notes))
         }
         Some(MeshFormat::Obj) => {
             let bytes = read_file(path)?;
             let (mesh, x) = obj::parse_with_extras(&bytes).map_err(|m| Error::format(path, m))?;
             if let Some(c) = x.vertex_colours {
-                return Ok((mesh, Some(Colours::Vertex(c))));
+                return Ok((mesh, Some(Colours::Vertex(c)), notes));
             }
-            let colours = obj_materials(path, &mesh, &x)?;
-            Ok((mesh, colours))
+            let colours = obj_materials(path, &mesh, &x, &mut notes);
+            Ok((mesh, colours, notes))
         }
-        _ => Ok((read_mesh(path)?, None)),
+        _ => Ok((read_mesh(path)?, None, notes)),
+    }
+}
+
+/// The file a name in an OBJ or MTL statement refers to, relative to `dir`: the whole name
+/// (which may hold spaces), else the name with its leading words dropped one by one (the
+/// options before a `map_Kd` file: `-bm 1`, `-s 1 1 1`, ...); `\` read as `/`.
+fn resolve(dir: &Path, name: &str) -> Option<std::path::PathBuf> {
+    let name = name.trim().replace('\\', "/");
+    let mut rest = name.as_str();
+    loop {
+        let p = dir.join(rest);
+        if !rest.is_empty() && p.is_file() {
+            return Some(p);
+        }
+        match rest.find(char::is_whitespace) {
+            Some(i) => rest = rest[i..].trim_start(),
+            None => return None,
+        }
     }
 }
 
 /// The material colours of an OBJ: `None` without `usemtl` or a library that defines them.
-fn obj_materials(path: &Path, mesh: &TriMesh, x: &obj::ObjExtras) -> Result<Option<Colours>> {
+/// Libraries and textures that cannot be read are left out, with a note in `notes`.
+fn obj_materials(
+    path: &Path,
+    mesh: &TriMesh,
+    x: &obj::ObjExtras,
+    notes: &mut Vec<String>,
+) -> Option<Colours> {
     if x.material_names.is_empty() || x.mtllibs.is_empty() {
-        return Ok(None);
+        return None;
     }
     let dir = path.parent().unwrap_or(Path::new(""));
-    let mut defined: Vec<(String, Rgb, Option<String>)> = Vec::new();
+    // Each material with the folder of its library (textures are relative to it).
+    let mut defined: Vec<(MtlEntry, std::path::PathBuf)> = Vec::new();
     for lib in &x.mtllibs {
-        let p = dir.join(lib);
-        let text = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
-        defined.extend(parse_mtl(&text));
+        // `mtllib a.mtl b.mtl` names two files; `mtllib my model.mtl` one with a space.
+        let files: Vec<std::path::PathBuf> = match resolve(dir, lib) {
+            Some(p) if p.ends_with(lib.trim().replace('\\', "/")) => vec![p],
+            _ => lib
+                .split_whitespace()
+                .filter_map(|n| {
+                    let p = resolve(dir, n);
+                    if p.is_none() {
+                        notes.push(format!("the material library {n} was not found"));
+                    }
+                    p
+                })
+                .collect(),
+        };
+        for p in files {
+            match std::fs::read(&p) {
+                Ok(bytes) => {
+                    let lib_dir = p.parent().unwrap_or(Path::new("")).to_path_buf();
+                    defined.extend(
+                        parse_mtl(&String::from_utf8_lossy(&bytes))
+                            .into_iter()
+                            .map(|m| (m, lib_dir.clone())),
+                    );
+                }
+                Err(e) => notes.push(format!("cannot read {}: {e}", p.display())),
+            }
+        }
     }
+    // One decoding per texture file, however many materials name it.
+    let mut textures: Vec<(std::path::PathBuf, Option<std::sync::Arc<Image>>)> = Vec::new();
     let mut materials = Vec::with_capacity(x.material_names.len() + 1);
     let mut any = false;
     for name in &x.material_names {
-        match defined.iter().rev().find(|(n, _, _)| n == name) {
-            Some((_, kd, map)) => {
+        match defined.iter().rev().find(|(m, _)| m.name == *name) {
+            Some((m, lib_dir)) => {
                 any = true;
-                let texture = match map {
-                    Some(m) => Some(read_texture(&dir.join(m))?),
-                    None => None,
-                };
+                let texture = m.map_kd.as_deref().and_then(|file| {
+                    let Some(p) = resolve(lib_dir, file).or_else(|| resolve(dir, file)) else {
+                        notes.push(format!(
+                            "the texture {file} of material {name} was not found: its Kd is used"
+                        ));
+                        return None;
+                    };
+                    if let Some((_, t)) = textures.iter().find(|(q, _)| *q == p) {
+                        return t.clone();
+                    }
+                    let t = match read_texture(&p) {
+                        Ok(t) => Some(std::sync::Arc::new(t)),
+                        Err(e) => {
+                            notes.push(format!("{e}: the Kd of material {name} is used"));
+                            None
+                        }
+                    };
+                    textures.push((p, t.clone()));
+                    t
+                });
                 materials.push(Material {
-                    diffuse: *kd,
+                    diffuse: m.kd,
                     texture,
                 });
             }
@@ -73,7 +155,7 @@ fn obj_materials(path: &Path, mesh: &TriMesh, x: &obj::ObjExtras) -> Result<Opti
         }
     }
     if !any {
-        return Ok(None);
+        return None;
     }
     // Faces before any `usemtl`: white, as viewers draw them.
     let plain = materials.len() as u32;
@@ -104,29 +186,46 @@ fn obj_materials(path: &Path, mesh: &TriMesh, x: &obj::ObjExtras) -> Result<Opti
         material,
         materials,
     });
-    Ok(t.fits(mesh.vertices.len(), mesh.faces.len()).then_some(t))
+    t.fits(mesh.vertices.len(), mesh.faces.len()).then_some(t)
 }
 
-/// The materials of an MTL file: name, `Kd` (default white) and `map_Kd` (its last token,
-/// the file; options before it are ignored).
-fn parse_mtl(text: &str) -> Vec<(String, Rgb, Option<String>)> {
-    let mut out: Vec<(String, Rgb, Option<String>)> = Vec::new();
+/// One material of an MTL file.
+struct MtlEntry {
+    name: String,
+    /// `Kd` (default white; non-finite values read as 0).
+    kd: Rgb,
+    /// `map_Kd`: the rest of its line (options, then the file; resolved by [`resolve`]).
+    map_kd: Option<String>,
+}
+
+/// The materials of an MTL file.
+fn parse_mtl(text: &str) -> Vec<MtlEntry> {
+    let mut out: Vec<MtlEntry> = Vec::new();
     for line in text.lines() {
         let line = line.split('#').next().unwrap_or("").trim();
         let mut toks = line.split_whitespace();
         match toks.next() {
-            Some("newmtl") => {
-                out.push((toks.collect::<Vec<_>>().join(" "), [1.0; 3], None));
-            }
+            Some("newmtl") => out.push(MtlEntry {
+                name: toks.collect::<Vec<_>>().join(" "),
+                kd: [1.0; 3],
+                map_kd: None,
+            }),
             Some("Kd") => {
                 let v: Vec<f32> = toks.filter_map(|t| t.parse().ok()).collect();
                 if let (Some(m), 3..) = (out.last_mut(), v.len()) {
-                    m.1 = [v[0], v[1], v[2]].map(|c| c.clamp(0.0, 1.0));
+                    m.kd = [v[0], v[1], v[2]].map(|c| {
+                        if c.is_finite() {
+                            c.clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        }
+                    });
                 }
             }
             Some("map_Kd") => {
-                if let (Some(m), Some(file)) = (out.last_mut(), toks.last()) {
-                    m.2 = Some(file.to_string());
+                let rest = line["map_Kd".len()..].trim();
+                if let (Some(m), false) = (out.last_mut(), rest.is_empty()) {
+                    m.map_kd = Some(rest.to_string());
                 }
             }
             _ => {}
@@ -268,10 +367,46 @@ mod tests {
         // The first corner's texture coordinate: the left texel, red.
         assert_eq!(c.at(&m.faces, 1, [1.0, 0.0, 0.0]), [1.0, 0.0, 0.0]);
         assert_eq!(c.at(&m.faces, 1, [0.0, 0.0, 1.0]), [0.0, 0.0, 1.0]);
-        // A missing texture is an error naming it.
+        // A texture in the library's folder, named with a space, after options; the
+        // library in a subfolder, named with a space too.
+        std::fs::create_dir_all(d.join("mat")).unwrap();
+        img.save(d.join("mat/my tex.png")).unwrap();
+        std::fs::write(
+            d.join("mat/my lib.mtl"),
+            "newmtl green\nKd 0 1 0\nnewmtl textured\nKd 1 1 1\nmap_Kd -s 1 1 1 my tex.png\n",
+        )
+        .unwrap();
+        let obj = std::fs::read_to_string(d.join("m.obj")).unwrap();
+        std::fs::write(
+            d.join("n.obj"),
+            obj.replace("mtllib m.mtl", "mtllib mat\\my lib.mtl"),
+        )
+        .unwrap();
+        let (m2, c2, notes) = read_mesh_coloured_noted(d.join("n.obj")).unwrap();
+        assert!(notes.is_empty(), "{notes:?}");
+        assert_eq!(
+            c2.unwrap().at(&m2.faces, 1, [1.0, 0.0, 0.0]),
+            [1.0, 0.0, 0.0]
+        );
+        // A missing texture costs only its colours: the material's Kd, with a note.
         std::fs::remove_file(d.join("tex.png")).unwrap();
-        let e = read_mesh_coloured(d.join("m.obj")).unwrap_err();
-        assert!(e.to_string().contains("tex.png"), "{e}");
+        let (m, c, notes) = read_mesh_coloured_noted(d.join("m.obj")).unwrap();
+        assert_eq!(m.faces.len(), 2);
+        assert!(
+            notes.len() == 1 && notes[0].contains("tex.png"),
+            "{notes:?}"
+        );
+        assert_eq!(c.unwrap().at(&m.faces, 1, [1.0, 0.0, 0.0]), [1.0, 1.0, 1.0]);
+        // So does a missing library, and an unreadable texture.
+        std::fs::write(d.join("tex.png"), b"not a png").unwrap();
+        let (_, c, notes) = read_mesh_coloured_noted(d.join("m.obj")).unwrap();
+        assert!(c.is_some() && notes[0].contains("texture"), "{notes:?}");
+        std::fs::remove_file(d.join("m.mtl")).unwrap();
+        let (m, c, notes) = read_mesh_coloured_noted(d.join("m.obj")).unwrap();
+        assert!(
+            c.is_none() && m.faces.len() == 2 && notes[0].contains("m.mtl"),
+            "{notes:?}"
+        );
         std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -28,7 +28,7 @@ pub mod stl;
 
 use std::path::Path;
 
-pub use coloured::{read_mesh_coloured, write_mesh_coloured};
+pub use coloured::{read_mesh_coloured, read_mesh_coloured_noted, write_mesh_coloured};
 
 use crate::error::{Error, Result};
 use crate::trimesh::TriMesh;

@@ -64,6 +64,8 @@ pub struct NpyArray {
     pub data: Vec<f64>,
     /// True when the file stored `float32` values (converted exactly to `f64` here).
     pub was_f32: bool,
+    /// True when the file stored bytes (`uint8` or `bool`): colours in `0..=255`, occupancies.
+    pub was_bytes: bool,
 }
 
 /// Reads a `.npy` file holding a float32 or float64 array of any rank (NaN and infinities
@@ -543,6 +545,7 @@ pub(crate) fn read_array<R: Read>(
         shape,
         data,
         was_f32: size == 4,
+        was_bytes: size == 1,
     })
 }
 

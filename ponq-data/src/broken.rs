@@ -52,11 +52,22 @@ pub enum Defect {
     /// Fins: triangles half a cell tall standing on edges, outside the solid (non-manifold
     /// edges).
     Fins,
+    /// A soup whose corners are moved apart by up to 1e-3 of the bounding-box diagonal (10x
+    /// the repair's weld: patches whose borders do not meet).
+    Gaps3,
+    /// The same, by up to 1e-2 of the diagonal.
+    Gaps2,
+    /// T-junctions: a third of the edges split at their middle on one side only (the face on
+    /// the other side keeps the long edge), as B-rep tessellators write them between faces.
+    TJunctions,
+    /// Every class at once: 10% of the faces flipped, 5% duplicated the other way, fins,
+    /// T-junctions, then a soup with gaps of up to 1e-3 of the diagonal.
+    Mixed,
 }
 
 impl Defect {
     /// Every class, in the order of the reports.
-    pub const ALL: [Defect; 10] = [
+    pub const ALL: [Defect; 14] = [
         Defect::Soup,
         Defect::Cracks,
         Defect::Flip10,
@@ -67,6 +78,10 @@ impl Defect {
         Defect::NestedShell,
         Defect::Overlap,
         Defect::Fins,
+        Defect::Gaps3,
+        Defect::Gaps2,
+        Defect::TJunctions,
+        Defect::Mixed,
     ];
 
     /// The name the programs take and print.
@@ -82,6 +97,10 @@ impl Defect {
             Defect::NestedShell => "nested-shell",
             Defect::Overlap => "overlap",
             Defect::Fins => "fins",
+            Defect::Gaps3 => "gaps1e-3",
+            Defect::Gaps2 => "gaps1e-2",
+            Defect::TJunctions => "t-junctions",
+            Defect::Mixed => "mixed",
         }
     }
 }
@@ -112,6 +131,76 @@ fn diagonal(mesh: &TriMesh) -> Result<f64> {
         .bounding_box()
         .ok_or_else(|| DataError::Invalid("the mesh has no vertex".into()))?;
     Ok((0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt())
+}
+
+/// The mesh as a soup whose every vertex is moved uniformly in the ball of radius `r`.
+fn jittered_soup(mesh: &TriMesh, r: f64, rng: &mut ChaCha8Rng) -> TriMesh {
+    let mut m = soup(mesh);
+    for p in &mut m.vertices {
+        let d = loop {
+            let d = [0; 3].map(|_| rng.random_range(-1.0..1.0));
+            if dot(d, d) <= 1.0 {
+                break d;
+            }
+        };
+        for k in 0..3 {
+            p[k] += r * d[k];
+        }
+    }
+    m
+}
+
+/// T-junctions: about a third of the edges of two faces get a vertex at their middle, and one
+/// of their two faces (chosen at random) is split there in two; the other keeps the long
+/// edge. A face is split at most once.
+fn t_junctions(mesh: &TriMesh, rng: &mut ChaCha8Rng) -> TriMesh {
+    use std::collections::HashMap;
+    let mut m = mesh.clone();
+    let mut faces_of: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    for (f, t) in mesh.faces.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            faces_of.entry((a.min(b), a.max(b))).or_default().push(f);
+        }
+    }
+    let mut edges: Vec<((u32, u32), Vec<usize>)> = faces_of
+        .into_iter()
+        .filter(|(_, fs)| fs.len() == 2)
+        .collect();
+    edges.sort_unstable_by_key(|(e, _)| *e);
+    let mut split = vec![false; mesh.faces.len()];
+    let mut out: Vec<[u32; 3]> = Vec::with_capacity(mesh.faces.len() * 2);
+    for ((a, b), fs) in edges {
+        if !rng.random_bool(1.0 / 3.0) {
+            continue;
+        }
+        let f = fs[usize::from(rng.random_bool(0.5))];
+        if split[f] {
+            continue;
+        }
+        split[f] = true;
+        let mid = m.vertices.len() as u32;
+        let (pa, pb) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
+        m.vertices.push([0, 1, 2].map(|k| 0.5 * (pa[k] + pb[k])));
+        // The face with its edge (a, b) in its own order: (u, v, w) with u -> v the edge.
+        let t = mesh.faces[f];
+        let k = (0..3)
+            .find(|&k| {
+                let (u, v) = (t[k], t[(k + 1) % 3]);
+                (u, v) == (a, b) || (u, v) == (b, a)
+            })
+            .unwrap_or(0);
+        let (u, v, w) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+        out.push([u, mid, w]);
+        out.push([mid, v, w]);
+    }
+    for (f, t) in mesh.faces.iter().enumerate() {
+        if !split[f] {
+            out.push(*t);
+        }
+    }
+    m.faces = out;
+    m
 }
 
 /// The mesh as a soup: three vertices of its own per face.
@@ -214,21 +303,16 @@ pub fn break_mesh(mesh: &TriMesh, defect: Defect, seed: u64, cell: f64) -> Resul
     let mut m = mesh.clone();
     match defect {
         Defect::Soup => m = soup(mesh),
-        Defect::Cracks => {
-            m = soup(mesh);
-            let r = 1e-5 * diag;
-            for p in &mut m.vertices {
-                // Uniform in the ball of radius r.
-                let d = loop {
-                    let d = [0; 3].map(|_| rng.random_range(-1.0..1.0));
-                    if dot(d, d) <= 1.0 {
-                        break d;
-                    }
-                };
-                for k in 0..3 {
-                    p[k] += r * d[k];
-                }
-            }
+        Defect::Cracks => m = jittered_soup(mesh, 1e-5 * diag, &mut rng),
+        Defect::Gaps3 => m = jittered_soup(mesh, 1e-3 * diag, &mut rng),
+        Defect::Gaps2 => m = jittered_soup(mesh, 1e-2 * diag, &mut rng),
+        Defect::TJunctions => m = t_junctions(mesh, &mut rng),
+        Defect::Mixed => {
+            m = break_mesh(&m, Defect::Flip10, seed ^ 3, cell)?;
+            m = break_mesh(&m, Defect::Duplicates, seed ^ 1, cell)?;
+            m = break_mesh(&m, Defect::Fins, seed ^ 2, cell)?;
+            m = t_junctions(&m, &mut rng);
+            m = jittered_soup(&m, 1e-3 * diag, &mut rng);
         }
         Defect::Flip10 | Defect::Flip50 => {
             let share = if defect == Defect::Flip10 { 0.1 } else { 0.5 };

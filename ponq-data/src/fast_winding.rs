@@ -233,9 +233,9 @@ fn build(tris: &mut [[[f64; 3]; 3]], start: usize, end: usize, nodes: &mut Vec<N
             for j in 0..3 {
                 m1[i][j] += an[i] * s[j] / 3.0;
                 for k in 0..3 {
-                    let second = (p[0][j] * p[0][k] + p[1][j] * p[1][k] + p[2][j] * p[2][k]
-                        + s[j] * s[k])
-                        / 12.0;
+                    let second =
+                        (p[0][j] * p[0][k] + p[1][j] * p[1][k] + p[2][j] * p[2][k] + s[j] * s[k])
+                            / 12.0;
                     m2[i][j][k] += an[i] * second;
                 }
             }

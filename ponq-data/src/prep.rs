@@ -101,7 +101,11 @@ pub fn prepare_mesh(
     if points.is_empty() {
         return Err(DataError::Invalid("the mesh has no area to sample".into()));
     }
-    let sdf = MeshSdf::new(&m)?;
+    // Signed by the fast winding number where the repair could not prove a closed surface.
+    let sdf = match &repaired {
+        Some(r) => r.distances(&m)?,
+        None => MeshSdf::new(&m)?,
+    };
     // Where the repair removed faces, the closed surface they came from gives the sign.
     let solid = match repaired.as_ref().and_then(|r| r.solid.as_ref()) {
         Some(s) => Some(MeshSdf::new(&norm.apply_mesh(s))?),

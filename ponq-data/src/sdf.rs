@@ -289,6 +289,10 @@ pub struct MeshSdf {
     chain_closed: bool,
     /// Not closed per `check_topology`, or `!chain_closed`.
     open: bool,
+    /// When set, winding numbers are this fast winding number of the faces as they are
+    /// (soups with gaps, whose boundary chains are the whole mesh: see
+    /// [`MeshSdf::with_fast_winding`]).
+    fast: Option<std::sync::Arc<crate::fast_winding::FastWinding>>,
 }
 
 impl MeshSdf {
@@ -382,7 +386,26 @@ impl MeshSdf {
             cap_edges,
             chain_closed,
             open: !report.is_some_and(|r| r.closed) || !chain_closed,
+            fast: None,
         }
+    }
+
+    /// [`MeshSdf::new`] whose winding numbers (and so signs) are the fast winding number of
+    /// the faces as they are ([`crate::fast_winding`]): for soups whose faces do not meet
+    /// (gaps, T-junctions), where the exact hierarchy's boundary chains are the whole mesh.
+    /// Distances are exact as with [`MeshSdf::new`]. A mesh whose chain is closed keeps the
+    /// exact winding number.
+    ///
+    /// # Errors
+    /// As [`MeshSdf::new`].
+    pub fn with_fast_winding(mesh: &TriMesh) -> Result<Self> {
+        let mut s = Self::new(mesh)?;
+        if !s.chain_closed {
+            s.fast = Some(std::sync::Arc::new(
+                crate::fast_winding::FastWinding::of_mesh(&s.verts, &s.faces),
+            ));
+        }
+        Ok(s)
     }
 
     /// True when the mesh is not closed or not consistently oriented (see [`SdfGrid::open`]).
@@ -446,6 +469,9 @@ impl MeshSdf {
     /// Generalised winding number at `p` (exact up to rounding; `1` inside and `0` outside a
     /// closed outward-oriented mesh; undefined on the surface).
     pub fn winding_number(&self, p: [f64; 3]) -> f64 {
+        if let Some(f) = &self.fast {
+            return f.winding_number(p);
+        }
         let mut sum = 0.0;
         let mut stack = [0u32; STACK];
         let mut sp = 1;

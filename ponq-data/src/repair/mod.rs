@@ -318,6 +318,10 @@ pub struct Repaired {
     pub solid: Option<TriMesh>,
     /// What was found and done.
     pub report: DefectReport,
+    /// The sign is the fast winding number of [`Repaired::mesh`]'s faces as they are
+    /// ([`MeshSdf::with_fast_winding`]): the topological repair could not prove a closed
+    /// surface (the report's `winding_sign` says why).
+    pub fast_sign: bool,
 }
 
 impl Repaired {
@@ -333,7 +337,7 @@ impl Repaired {
         res: usize,
         progress: impl Fn(usize) + Sync,
     ) -> Result<crate::sdf::SdfGrid> {
-        let sdf = MeshSdf::new(&map(&self.mesh))?;
+        let sdf = self.distances(&map(&self.mesh))?;
         match &self.solid {
             Some(s) => sdf.grid_signed_by(&MeshSdf::new(&map(s))?, res, progress),
             None => sdf.grid(res, progress),
@@ -342,6 +346,19 @@ impl Repaired {
 }
 
 impl Repaired {
+    /// The distance (and, without a solid, sign) structure of `mesh`, the repaired mesh
+    /// moved: signed by the fast winding number when [`Repaired::fast_sign`].
+    ///
+    /// # Errors
+    /// As [`MeshSdf::new`].
+    pub fn distances(&self, mesh: &TriMesh) -> Result<MeshSdf> {
+        if self.fast_sign {
+            MeshSdf::with_fast_winding(mesh)
+        } else {
+            MeshSdf::new(mesh)
+        }
+    }
+
     /// [`Repaired::grid`] near the surface only ([`MeshSdf::band_signed_by`]).
     ///
     /// # Errors
@@ -355,7 +372,7 @@ impl Repaired {
         reach: usize,
         progress: impl Fn(usize, usize) + Sync,
     ) -> Result<crate::sdf::SdfBand> {
-        let sdf = MeshSdf::new(&map(&self.mesh))?;
+        let sdf = self.distances(&map(&self.mesh))?;
         match &self.solid {
             Some(s) => sdf.band_signed_by(
                 &MeshSdf::new(&map(s))?,
@@ -423,6 +440,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             mesh: out,
             solid: None,
             report,
+            fast_sign: false,
         });
     }
     if clean {
@@ -454,6 +472,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
                 mesh: mesh.clone(),
                 solid: None,
                 report,
+                fast_sign: false,
             });
         }
     }
@@ -474,6 +493,28 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
                 .into(),
         ));
     }
+    // Faces that do not meet their neighbours even after the weld (a soup whose patches have
+    // gaps, T-junctions on most faces): no closed surface can be proved from them, and
+    // closing every loop would only make slivers. The fast winding number of the faces as
+    // read signs the grid; the distances are to those faces.
+    if opts.fill_holes && opts.remove_internal {
+        let loose = loose_share(&faces);
+        if loose > 0.5 {
+            return winding_fallback(
+                mesh,
+                &faces0,
+                report,
+                diag,
+                format!(
+                    "{:.0}% of the faces are in parts with more boundary edges than one per \
+                     four faces after welding within {:e} of the diagonal: gaps or \
+                     T-junctions",
+                    100.0 * loose,
+                    opts.weld
+                ),
+            );
+        }
+    }
     // 3: orient each part consistently.
     let uses = edge_uses(&faces);
     let (comp, parts) = manifold_components(&faces, &uses);
@@ -484,6 +525,7 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             mesh,
             solid: None,
             report,
+            fast_sign: false,
         });
     }
     // 4: close the holes (the edge uses again: the orientation changed their directions).
@@ -604,6 +646,17 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
             solid_faces = Some(faces);
         }
         if kept.is_empty() {
+            // Nothing the topology proves: the fast winding number of the faces as read may
+            // still see a solid (patches whose borders do not meet).
+            if let Ok(r) = winding_fallback(
+                mesh,
+                &faces0,
+                report.clone(),
+                diag,
+                "no face of the repaired mesh separates an inside from an outside".into(),
+            ) {
+                return Ok(r);
+            }
             return Err(DataError::Invalid(
                 "no face of the mesh separates an inside from an outside: it encloses no volume \
                  (a surface has no inside: reconstruct it as an open surface, --open in the \
@@ -626,6 +679,120 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
         mesh,
         solid,
         report,
+        fast_sign: false,
+    })
+}
+
+/// The share of `faces` in loose parts: parts (joined across edges of exactly two faces)
+/// with more than one boundary edge per four faces.
+fn loose_share(faces: &[[u32; 3]]) -> f64 {
+    let uses = edge_uses(faces);
+    let (comp, parts) = manifold_components(faces, &uses);
+    let mut boundary = vec![0usize; parts];
+    for g in edges::by_edge(&uses) {
+        if g.len() == 1 {
+            boundary[comp[g[0].face as usize] as usize] += 1;
+        }
+    }
+    let mut count = vec![0usize; parts];
+    for &c in &comp {
+        count[c as usize] += 1;
+    }
+    let loose: usize = (0..parts)
+        .filter(|&p| 4 * boundary[p] > count[p])
+        .map(|p| count[p])
+        .sum();
+    loose as f64 / faces.len().max(1) as f64
+}
+
+/// The input's faces as read (vertices merged at equal positions, degenerate and repeated
+/// faces dropped: `faces0`) but those that separate nothing, signed by their fast winding
+/// number, with `why` in the report.
+/// An error when the winding number sees no solid (no point of a 16^3 lattice over the box
+/// with `|w| > 3/4`).
+fn winding_fallback(
+    mesh: &TriMesh,
+    faces0: &[[u32; 3]],
+    mut report: DefectReport,
+    diag: f64,
+    why: String,
+) -> Result<Repaired> {
+    let no_volume = || {
+        DataError::Invalid(
+            "no face of the mesh separates an inside from an outside: it encloses no volume (a \
+             surface has no inside: reconstruct it as an open surface, --open in the \
+             programs, open=True in Python)"
+                .into(),
+        )
+    };
+    if faces0.is_empty() {
+        return Err(no_volume());
+    }
+    // Faces that separate nothing (fins, internal faces): the winding number of the other
+    // faces at the face, the mean of those just in front and just behind (its own half-turns
+    // cancel), is about 1/2 on the solid's boundary, 0 outside and 1 inside.
+    let all = crate::fast_winding::FastWinding::of_mesh(&mesh.vertices, faces0);
+    let eps = 1e-6 * diag;
+    // A face with more of the solid in front than behind runs against the majority (a
+    // flipped face of a soup): turned, so that the sign next to it is not inverted.
+    let sides: Vec<(bool, bool)> = {
+        use rayon::prelude::*;
+        faces0
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+                let n =
+                    ponq_mesh::vec3::cross(ponq_mesh::vec3::sub(b, a), ponq_mesh::vec3::sub(c, a));
+                let len = ponq_mesh::vec3::norm(n);
+                if !(len > 0.0 && len.is_finite()) {
+                    return (true, false);
+                }
+                let e = eps.min(0.05 * (0.5 * len).sqrt());
+                let g = [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0);
+                let front = all.winding_number([0, 1, 2].map(|k| g[k] + e * n[k] / len));
+                let back = all.winding_number([0, 1, 2].map(|k| g[k] - e * n[k] / len));
+                (
+                    (0.25..=0.75).contains(&(0.5 * (front + back)).abs()),
+                    front.abs() > back.abs(),
+                )
+            })
+            .collect()
+    };
+    let kept: Vec<[u32; 3]> = faces0
+        .iter()
+        .zip(&sides)
+        .filter(|&(_, &(k, _))| k)
+        .map(|(t, &(_, flip))| if flip { [t[0], t[2], t[1]] } else { *t })
+        .collect();
+    report.inverted_faces_flipped = sides.iter().filter(|&&(k, f)| k && f).count();
+    if kept.is_empty() {
+        return Err(no_volume());
+    }
+    report.internal_faces_removed = faces0.len() - kept.len();
+    let fast = crate::fast_winding::FastWinding::of_mesh(&mesh.vertices, &kept);
+    let (lo, hi) = mesh.bounding_box().ok_or_else(no_volume)?;
+    let n = 16;
+    let lattice: Vec<[f64; 3]> = (0..n * n * n)
+        .map(|i| {
+            let ijk = [i / (n * n), (i / n) % n, i % n];
+            [0, 1, 2].map(|k| lo[k] + (hi[k] - lo[k]) * (ijk[k] as f64 + 0.5) / n as f64)
+        })
+        .collect();
+    if !fast
+        .winding_numbers(&lattice)
+        .iter()
+        .any(|w| w.abs() > 0.75)
+    {
+        return Err(no_volume());
+    }
+    report.repaired = true;
+    report.winding_sign = Some(why);
+    let (out, report) = finish(mesh.vertices.clone(), kept, report);
+    Ok(Repaired {
+        mesh: out,
+        solid: None,
+        report,
+        fast_sign: true,
     })
 }
 

@@ -51,6 +51,10 @@ pub struct DefectReport {
     /// Share of the grid's nodes whose winding number was within 1/4 of the inside threshold
     /// 1/2 (a sign that is a guess), when the grid had to be signed node by node.
     pub ambiguous_node_share: Option<f64>,
+    /// Why the sign is the fast winding number of the faces as read
+    /// ([`crate::fast_winding`]) rather than the repaired surface's (`None`: the topological
+    /// repair proved a closed surface, or the mesh was clean).
+    pub winding_sign: Option<String>,
 }
 
 impl DefectReport {
@@ -65,51 +69,36 @@ impl DefectReport {
             || self.repaired
     }
 
-    /// The report as one JSON object (keys as the field names; `null` for a check not run).
+    /// The report as one JSON object (keys as the field names; `null` for a check not run;
+    /// `sign`: `"topological"` or `"winding number"`, with `sign_reason`).
     pub fn to_json(&self) -> String {
-        let opt_u = |x: Option<usize>| x.map_or("null".to_string(), |v| v.to_string());
-        let opt_f = |x: Option<f64>| {
-            x.filter(|v| v.is_finite())
-                .map_or("null".to_string(), |v| format!("{v}"))
-        };
-        let fields: Vec<(&str, String)> = vec![
-            ("input_vertices", self.input_vertices.to_string()),
-            ("input_faces", self.input_faces.to_string()),
-            ("boundary_edges", self.boundary_edges.to_string()),
-            ("nonmanifold_edges", self.nonmanifold_edges.to_string()),
-            ("misoriented_edges", self.misoriented_edges.to_string()),
-            ("degenerate_faces", self.degenerate_faces.to_string()),
-            ("duplicate_faces", self.duplicate_faces.to_string()),
-            ("opposite_duplicates", self.opposite_duplicates.to_string()),
-            ("components", self.components.to_string()),
-            (
-                "self_intersecting_pairs",
-                opt_u(self.self_intersecting_pairs),
-            ),
-            ("repaired", self.repaired.to_string()),
-            ("welded_vertices", self.welded_vertices.to_string()),
-            ("flipped_faces", self.flipped_faces.to_string()),
-            ("flipped_parts", self.flipped_parts.to_string()),
-            ("holes_filled", self.holes_filled.to_string()),
-            ("hole_faces_added", self.hole_faces_added.to_string()),
-            ("boundary_left", self.boundary_left.to_string()),
-            (
-                "internal_faces_removed",
-                self.internal_faces_removed.to_string(),
-            ),
-            (
-                "inverted_faces_flipped",
-                self.inverted_faces_flipped.to_string(),
-            ),
-            ("output_vertices", self.output_vertices.to_string()),
-            ("output_faces", self.output_faces.to_string()),
-            ("ambiguous_node_share", opt_f(self.ambiguous_node_share)),
-        ];
-        let body: Vec<String> = fields
-            .iter()
-            .map(|(k, v)| format!("\"{k}\": {v}"))
-            .collect();
-        format!("{{{}}}", body.join(", "))
+        serde_json::json!({
+            "input_vertices": self.input_vertices,
+            "input_faces": self.input_faces,
+            "boundary_edges": self.boundary_edges,
+            "nonmanifold_edges": self.nonmanifold_edges,
+            "misoriented_edges": self.misoriented_edges,
+            "degenerate_faces": self.degenerate_faces,
+            "duplicate_faces": self.duplicate_faces,
+            "opposite_duplicates": self.opposite_duplicates,
+            "components": self.components,
+            "self_intersecting_pairs": self.self_intersecting_pairs,
+            "repaired": self.repaired,
+            "welded_vertices": self.welded_vertices,
+            "flipped_faces": self.flipped_faces,
+            "flipped_parts": self.flipped_parts,
+            "holes_filled": self.holes_filled,
+            "hole_faces_added": self.hole_faces_added,
+            "boundary_left": self.boundary_left,
+            "internal_faces_removed": self.internal_faces_removed,
+            "inverted_faces_flipped": self.inverted_faces_flipped,
+            "output_vertices": self.output_vertices,
+            "output_faces": self.output_faces,
+            "ambiguous_node_share": self.ambiguous_node_share.filter(|v| v.is_finite()),
+            "sign": if self.winding_sign.is_some() { "winding number" } else { "topological" },
+            "sign_reason": self.winding_sign,
+        })
+        .to_string()
     }
 }
 
@@ -151,6 +140,12 @@ impl fmt::Display for DefectReport {
                 f,
                 "; {:.2}% of the grid's nodes have an ambiguous winding number",
                 100.0 * s
+            )?;
+        }
+        if let Some(why) = &self.winding_sign {
+            write!(
+                f,
+                "\nsign: the fast winding number of the faces as read ({why}); distances to them"
             )?;
         }
         if !self.repaired {

@@ -94,10 +94,38 @@ fn every_defect_class_gives_back_the_solid() {
                 compare(&want, &got, 2.0 * cell)
             };
             let nodes = want.values.len();
+            // Past the weld (soups with gaps, T-junctions): signed by the fast winding number
+            // of the faces as read, whose corners moved by up to `jitter`; nodes closer to the
+            // surface than that may change sign, and distances move by up to it.
+            let jitter = match defect {
+                Defect::Gaps3 | Defect::Mixed => 2e-3,
+                Defect::Gaps2 => 2e-2,
+                _ => 0.0,
+            };
+            let past_weld = matches!(
+                defect,
+                Defect::Gaps3 | Defect::Gaps2 | Defect::TJunctions | Defect::Mixed
+            );
+            assert_eq!(
+                report.winding_sign.is_some(),
+                past_weld,
+                "{name} {defect}: {report}"
+            );
+            let signs = if past_weld {
+                want.values
+                    .iter()
+                    .zip(&got.values)
+                    .filter(|(x, y)| x.abs() > jitter && (**x < 0.0) != (**y < 0.0))
+                    .count()
+            } else {
+                signs
+            };
             // A sliver of nodes next to the surface may change sign where holes were patched
-            // or faces crossing another copy were kept or dropped whole.
+            // or faces crossing another copy were kept or dropped whole; single faces flipped
+            // in a soup with gaps (mixed) invert the winding number next to them.
             let allowed = match defect {
                 Defect::Holes | Defect::Overlap => nodes / 500,
+                Defect::Mixed => nodes / 100,
                 _ => 0,
             };
             assert!(
@@ -110,7 +138,9 @@ fn every_defect_class_gives_back_the_solid() {
             // large faces): within a cell.
             let tol = match defect {
                 Defect::Overlap => cell,
-                _ => 1e-4,
+                // Fins stand half a cell off the surface (kept: nothing is removed there).
+                Defect::Mixed => cell,
+                _ => 1e-4 + jitter,
             };
             assert!(
                 worst <= tol,
@@ -118,7 +148,7 @@ fn every_defect_class_gives_back_the_solid() {
             );
             // Closed and oriented (vertices at one position merged) where the defect leaves a
             // solid's surface behind.
-            if !matches!(defect, Defect::Overlap) {
+            if !matches!(defect, Defect::Overlap) && !past_weld {
                 assert!(
                     !MeshSdf::new(&fixed).unwrap().is_open(),
                     "{name} {defect}: {}\n{report}",

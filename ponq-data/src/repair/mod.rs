@@ -504,7 +504,6 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
                 mesh,
                 &faces0,
                 report,
-                diag,
                 format!(
                     "{:.0}% of the faces are in parts with more boundary edges than one per \
                      four faces after welding within {:e} of the diagonal: gaps or \
@@ -652,7 +651,6 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
                 mesh,
                 &faces0,
                 report.clone(),
-                diag,
                 "no face of the repaired mesh separates an inside from an outside".into(),
             ) {
                 return Ok(r);
@@ -706,15 +704,13 @@ fn loose_share(faces: &[[u32; 3]]) -> f64 {
 }
 
 /// The input's faces as read (vertices merged at equal positions, degenerate and repeated
-/// faces dropped: `faces0`) but those that separate nothing, signed by their fast winding
-/// number, with `why` in the report.
+/// faces dropped: `faces0`), signed by their fast winding number, with `why` in the report.
 /// An error when the winding number sees no solid (no point of a 16^3 lattice over the box
 /// with `|w| > 3/4`).
 fn winding_fallback(
     mesh: &TriMesh,
     faces0: &[[u32; 3]],
     mut report: DefectReport,
-    diag: f64,
     why: String,
 ) -> Result<Repaired> {
     let no_volume = || {
@@ -728,47 +724,9 @@ fn winding_fallback(
     if faces0.is_empty() {
         return Err(no_volume());
     }
-    // Faces that separate nothing (fins, internal faces): the winding number of the other
-    // faces at the face, the mean of those just in front and just behind (its own half-turns
-    // cancel), is about 1/2 on the solid's boundary, 0 outside and 1 inside.
-    let all = crate::fast_winding::FastWinding::of_mesh(&mesh.vertices, faces0);
-    let eps = 1e-6 * diag;
-    // A face with more of the solid in front than behind runs against the majority (a
-    // flipped face of a soup): turned, so that the sign next to it is not inverted.
-    let sides: Vec<(bool, bool)> = {
-        use rayon::prelude::*;
-        faces0
-            .par_iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-                let n =
-                    ponq_mesh::vec3::cross(ponq_mesh::vec3::sub(b, a), ponq_mesh::vec3::sub(c, a));
-                let len = ponq_mesh::vec3::norm(n);
-                if !(len > 0.0 && len.is_finite()) {
-                    return (true, false);
-                }
-                let e = eps.min(0.05 * (0.5 * len).sqrt());
-                let g = [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0);
-                let front = all.winding_number([0, 1, 2].map(|k| g[k] + e * n[k] / len));
-                let back = all.winding_number([0, 1, 2].map(|k| g[k] - e * n[k] / len));
-                (
-                    (0.25..=0.75).contains(&(0.5 * (front + back)).abs()),
-                    front.abs() > back.abs(),
-                )
-            })
-            .collect()
-    };
-    let kept: Vec<[u32; 3]> = faces0
-        .iter()
-        .zip(&sides)
-        .filter(|&(_, &(k, _))| k)
-        .map(|(t, &(_, flip))| if flip { [t[0], t[2], t[1]] } else { *t })
-        .collect();
-    report.inverted_faces_flipped = sides.iter().filter(|&&(k, f)| k && f).count();
-    if kept.is_empty() {
-        return Err(no_volume());
-    }
-    report.internal_faces_removed = faces0.len() - kept.len();
+    // The faces as read, all of them: a face's own side test is unreliable within the gaps
+    // (a neighbour moved across it adds half a turn), so nothing is removed or turned here.
+    let kept: Vec<[u32; 3]> = faces0.to_vec();
     let fast = crate::fast_winding::FastWinding::of_mesh(&mesh.vertices, &kept);
     let (lo, hi) = mesh.bounding_box().ok_or_else(no_volume)?;
     let n = 16;

@@ -60,7 +60,7 @@ pub enum Defect {
     /// T-junctions: a third of the edges split at their middle on one side only (the face on
     /// the other side keeps the long edge), as B-rep tessellators write them between faces.
     TJunctions,
-    /// Every class at once: 10% of the faces flipped, 5% duplicated the other way, fins,
+    /// Every class at once: fins, 10% of the faces flipped, 5% duplicated the other way,
     /// T-junctions, then a soup with gaps of up to 1e-3 of the diagonal.
     Mixed,
 }
@@ -308,9 +308,10 @@ pub fn break_mesh(mesh: &TriMesh, defect: Defect, seed: u64, cell: f64) -> Resul
         Defect::Gaps2 => m = jittered_soup(mesh, 1e-2 * diag, &mut rng),
         Defect::TJunctions => m = t_junctions(mesh, &mut rng),
         Defect::Mixed => {
+            // Fins first: they stand along their face's normal, outside while it faces out.
+            m = break_mesh(&m, Defect::Fins, seed ^ 2, cell)?;
             m = break_mesh(&m, Defect::Flip10, seed ^ 3, cell)?;
             m = break_mesh(&m, Defect::Duplicates, seed ^ 1, cell)?;
-            m = break_mesh(&m, Defect::Fins, seed ^ 2, cell)?;
             m = t_junctions(&m, &mut rng);
             m = jittered_soup(&m, 1e-3 * diag, &mut rng);
         }

@@ -500,18 +500,17 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
     if opts.fill_holes && opts.remove_internal {
         let loose = loose_share(&faces);
         if loose > 0.5 {
-            return winding_fallback(
-                mesh,
-                &faces0,
-                report,
-                format!(
-                    "{:.0}% of the faces are in parts with more boundary edges than one per \
-                     four faces after welding within {:e} of the diagonal: gaps or \
-                     T-junctions",
-                    100.0 * loose,
-                    opts.weld
-                ),
+            let why = format!(
+                "{:.0}% of the faces are in parts of one or two faces after welding within \
+                 {:e} of the diagonal: patches whose borders do not meet",
+                100.0 * loose,
+                opts.weld
             );
+            // Where the winding number sees no solid either, the topological path goes on
+            // (and says what it finds).
+            if let Ok(r) = winding_fallback(mesh, &faces0, report.clone(), why) {
+                return Ok(r);
+            }
         }
     }
     // 3: orient each part consistently.
@@ -664,6 +663,20 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
         }
         m.faces = kept;
     }
+    // Loops the hole filling could not close, more than one per four faces left (edges split
+    // on one side only, T-junctions, leave slits no fan closes, and removing what separates
+    // nothing then eats the surface): the faces as read, signed by their winding number.
+    if opts.fill_holes && opts.remove_internal && 4 * report.boundary_left > m.faces.len() {
+        let why = format!(
+            "the topological repair left {} boundary edges open for {} faces: T-junctions or \
+             gaps",
+            report.boundary_left,
+            m.faces.len()
+        );
+        if let Ok(r) = winding_fallback(mesh, &faces0, report.clone(), why) {
+            return Ok(r);
+        }
+    }
     let solid = solid_faces.map(|faces| {
         let mut s = TriMesh {
             vertices: m.vertices.clone(),
@@ -681,25 +694,17 @@ pub fn repair_with_solid(mesh: &TriMesh, opts: &RepairOptions) -> Result<Repaire
     })
 }
 
-/// The share of `faces` in loose parts: parts (joined across edges of exactly two faces)
-/// with more than one boundary edge per four faces.
+/// The share of `faces` in parts of at most two faces (parts: faces joined across edges of
+/// exactly two faces). A soup whose corners do not meet is all such parts; a mesh with holes,
+/// however coarse, is not.
 fn loose_share(faces: &[[u32; 3]]) -> f64 {
     let uses = edge_uses(faces);
     let (comp, parts) = manifold_components(faces, &uses);
-    let mut boundary = vec![0usize; parts];
-    for g in edges::by_edge(&uses) {
-        if g.len() == 1 {
-            boundary[comp[g[0].face as usize] as usize] += 1;
-        }
-    }
     let mut count = vec![0usize; parts];
     for &c in &comp {
         count[c as usize] += 1;
     }
-    let loose: usize = (0..parts)
-        .filter(|&p| 4 * boundary[p] > count[p])
-        .map(|p| count[p])
-        .sum();
+    let loose: usize = count.iter().filter(|&&n| n <= 2).sum();
     loose as f64 / faces.len().max(1) as f64
 }
 
@@ -728,7 +733,15 @@ fn winding_fallback(
     // (a neighbour moved across it adds half a turn), so nothing is removed or turned here.
     let kept: Vec<[u32; 3]> = faces0.to_vec();
     let fast = crate::fast_winding::FastWinding::of_mesh(&mesh.vertices, &kept);
-    let (lo, hi) = mesh.bounding_box().ok_or_else(no_volume)?;
+    // The box of the faces' corners (stray vertices of the file left out).
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for &v in kept.iter().flatten() {
+        let p = mesh.vertices[v as usize];
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
     let n = 16;
     let lattice: Vec<[f64; 3]> = (0..n * n * n)
         .map(|i| {
@@ -745,6 +758,15 @@ fn winding_fallback(
     }
     report.repaired = true;
     report.winding_sign = Some(why);
+    // Nothing of the topological steps is in the output: the faces as read.
+    report.welded_vertices = 0;
+    report.flipped_faces = 0;
+    report.flipped_parts = 0;
+    report.holes_filled = 0;
+    report.hole_faces_added = 0;
+    report.boundary_left = 0;
+    report.internal_faces_removed = 0;
+    report.inverted_faces_flipped = 0;
     let (out, report) = finish(mesh.vertices.clone(), kept, report);
     Ok(Repaired {
         mesh: out,

@@ -61,10 +61,10 @@ fn a_two_coloured_cube_keeps_its_colours() {
     let d = tmp("colours-cube");
     let (v, f) = cube();
     // A PLY with face colours.
-    let mut ply = format!(
+    let mut ply = String::from(
         "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\n\
          property float z\nelement face 12\nproperty list uchar int vertex_indices\n\
-         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
     );
     for p in &v {
         ply += &format!("{} {} {}\n", p[0], p[1], p[2]);

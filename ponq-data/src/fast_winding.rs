@@ -14,8 +14,8 @@
 //! while every query near the surface (where `w` jumps) is summed exactly.
 //!
 //! Written here because no maintained Rust crate computes winding numbers of soups (libigl's is
-//! C++); the exact solid angle is [`crate::sdf::solid_angle`], the one the exact hierarchy of
-//! [`crate::sdf::MeshSdf`] uses for closed meshes.
+//! C++); the exact solid angle is [`solid_angle`], the one the exact hierarchy of
+//! [`crate::sdf::MeshSdf`] uses for closed meshes too.
 //!
 //! ```
 //! use ponq_data::fast_winding::FastWinding;
@@ -36,7 +36,18 @@ use std::f64::consts::PI;
 use ponq_mesh::vec3::{add, cross, dot, norm, scale, sub};
 use rayon::prelude::*;
 
-use crate::sdf::solid_angle;
+/// Signed solid angle of triangle `(a, b, c)` seen from `p` (Van Oosterom and Strackee),
+/// positive when `p` is on the side the normal `(b-a) x (c-a)` points away from, in
+/// `[-2 pi, 2 pi]`.
+pub fn solid_angle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let a = sub(a, p);
+    let b = sub(b, p);
+    let c = sub(c, p);
+    let (la, lb, lc) = (norm(a), norm(b), norm(c));
+    let det = dot(a, cross(b, c));
+    let den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
+    2.0 * det.atan2(den)
+}
 
 /// Triangles per leaf.
 const LEAF: usize = 8;

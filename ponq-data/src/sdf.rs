@@ -233,18 +233,7 @@ pub fn closest_point_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64;
     std::array::from_fn(|k| a[k] + ab[k] * v + ac[k] * w)
 }
 
-/// Signed solid angle of triangle `(a, b, c)` seen from `p` (Van Oosterom and Strackee),
-/// positive when `p` is on the side the normal `(b-a) x (c-a)` points away from, in
-/// `[-2 pi, 2 pi]`.
-pub fn solid_angle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
-    let a = sub(a, p);
-    let b = sub(b, p);
-    let c = sub(c, p);
-    let (la, lb, lc) = (norm(a), norm(b), norm(c));
-    let det = dot(a, cross(b, c));
-    let den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
-    2.0 * det.atan2(den)
-}
+pub use crate::fast_winding::solid_angle;
 
 /// The state of a run of closest-point queries ([`MeshSdf::closest_point_and_normal_with`]):
 /// the traversal stack and the last query's triangle. One per thread; it may move between

@@ -4,7 +4,10 @@
 //! - [`normalize`]: the `[-1,1]` convention and its inverse;
 //! - [`sampling`]: surface samples, and boundary samples for open surfaces;
 //! - [`sdf`] + [`occupancy`]: exact signed distance grids (the network's input) and the
-//!   ground-truth occupancy / "close" masks;
+//!   ground-truth occupancy / "close" masks; [`repair`] of broken meshes before them, and
+//!   [`fast_winding`], the sign of soups whose faces do not meet;
+//! - [`condition`]: grids in other conventions (units, sign, iso-level, occupancy, tanh) read
+//!   as signed distances; [`colour_transfer`]: colours from the input to the output;
 //! - [`synth`]: seeded procedural CAD-like training shapes;
 //! - [`dataset`] (the project's one-`.npz`-per-shape format, split files) and [`hdf5`] (the
 //!   authors' preprocessed files); [`prep`] builds datasets (`ponq-prep`);

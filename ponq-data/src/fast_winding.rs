@@ -142,9 +142,13 @@ impl FastWinding {
             return 0.0;
         }
         let mut sum = 0.0;
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(n) = stack.pop() {
+        // A fixed stack: median splits keep the depth at log2(F / LEAF) (25 for 2^28 faces),
+        // and the stack holds at most one pending child per level.
+        let mut stack = [0u32; 128];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let n = stack[sp];
             let node = &self.nodes[n as usize];
             let x = sub(node.centre, q);
             let d = norm(x);
@@ -155,8 +159,9 @@ impl FastWinding {
                     sum += solid_angle(q, t[0], t[1], t[2]) / (4.0 * PI);
                 }
             } else {
-                stack.push(node.right);
-                stack.push(node.left);
+                stack[sp] = node.right;
+                stack[sp + 1] = node.left;
+                sp += 2;
             }
         }
         sum

@@ -177,18 +177,7 @@ pub fn write_coloured_to<W: Write>(
     mesh: &TriMesh,
     colours: &[[f32; 3]],
 ) -> std::io::Result<()> {
-    check_writable(mesh)
-        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
-    if colours.len() != mesh.vertices.len() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!(
-                "{} colours for {} vertices",
-                colours.len(),
-                mesh.vertices.len()
-            ),
-        ));
-    }
+    super::file::check_coloured_writable(mesh, colours)?;
     writeln!(w, "COFF")?;
     writeln!(w, "{} {} 0", mesh.vertices.len(), mesh.faces.len())?;
     let rows: Vec<([f64; 3], [u8; 3])> = mesh

@@ -628,18 +628,7 @@ pub fn write_coloured_to<W: Write>(
     mesh: &TriMesh,
     colours: &[[f32; 3]],
 ) -> std::io::Result<()> {
-    check_writable(mesh)
-        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
-    if colours.len() != mesh.vertices.len() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!(
-                "{} colours for {} vertices",
-                colours.len(),
-                mesh.vertices.len()
-            ),
-        ));
-    }
+    super::file::check_coloured_writable(mesh, colours)?;
     let index_type = if mesh.vertices.len() > i32::MAX as usize + 1 {
         "uint"
     } else {

@@ -110,6 +110,21 @@ pub(crate) fn check_writable(mesh: &TriMesh) -> Result<()> {
     Ok(())
 }
 
+/// [`check_writable`] for a writer of a colour per vertex: the mesh, and as many colours as
+/// vertices; as an I/O error of kind `InvalidInput` (the writers' error type).
+pub(crate) fn check_coloured_writable(mesh: &TriMesh, colours: &[[f32; 3]]) -> std::io::Result<()> {
+    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, m);
+    check_writable(mesh).map_err(|e| invalid(e.to_string()))?;
+    if colours.len() != mesh.vertices.len() {
+        return Err(invalid(format!(
+            "{} colours for {} vertices",
+            colours.len(),
+            mesh.vertices.len()
+        )));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,19 +157,4 @@ mod tests {
             Err(std::io::ErrorKind::WriteZero)
         );
     }
-}
-
-/// [`check_writable`] for a writer of a colour per vertex: the mesh, and as many colours as
-/// vertices; as an I/O error of kind `InvalidInput` (the writers' error type).
-pub(crate) fn check_coloured_writable(mesh: &TriMesh, colours: &[[f32; 3]]) -> std::io::Result<()> {
-    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, m);
-    check_writable(mesh).map_err(|e| invalid(e.to_string()))?;
-    if colours.len() != mesh.vertices.len() {
-        return Err(invalid(format!(
-            "{} colours for {} vertices",
-            colours.len(),
-            mesh.vertices.len()
-        )));
-    }
-    Ok(())
 }
